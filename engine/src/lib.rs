@@ -1,0 +1,13 @@
+//! factory-engine: the contact pipeline of Factory (Narang et al., RSS 2022, section III) on wgpu.
+//!
+//! Data flows one way: triangle meshes ([`mesh`]) and URDFs ([`urdf`]) are loaded on the host, signed
+//! distance fields are baked on the CPU and cached on disk ([`sdf`]), and the GPU ([`gpu`]) generates one
+//! contact candidate per query triangle against the opposing SDF and reduces the candidates into patches in
+//! workgroup memory ([`contact`]). Every kernel has a plain-Rust twin used by parity tests.
+
+pub mod error;
+pub mod mesh;
+
+pub use error::{EngineError, Result};
+pub mod fsutil;
+pub mod sdf;
