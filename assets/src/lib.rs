@@ -1,1 +1,27 @@
+//! factory-assets: procedural parts for Factory's assembly tasks (Narang et al., RSS 2022, section IV-A),
+//! generated from the standards' parameters and exported as OBJ + URDF.
+//!
+//! - [`nut_bolt`]: ISO metric hex nuts and bolts M4-M20 (ISO 68-1 profile, ISO 965-1 class 6H/6g at the
+//!   tight or loose end of the band, Factory's nut/head/shank dimensions), helical threads, assembled.
+//! - [`peg_hole`]: round pegs and holes 4-16 mm with Factory's (paper Table VII) diameters, assembled.
+//! - [`Part`]: a closed, outward-wound [`TriMesh`](factory_engine::mesh::TriMesh) with mass properties and
+//!   its SDF resolution; [`Part::write`] writes `<name>.obj` and `<name>.urdf`.
+//!
+//! Units: metres, kilograms, seconds, radians throughout (fields say otherwise where they are in mm/um).
+//! Every assembly's zero pose is the assembled configuration.
 
+pub mod error;
+pub mod fastener;
+mod geom;
+pub mod iso;
+pub mod part;
+pub mod peg_hole;
+
+pub use error::{AssetError, Result};
+pub use fastener::{
+    bolt_closed_form_volume, nut_bolt, nut_closed_form_volume, NutBolt, ThreadOptions, BOLT_SDF_RESOLUTION,
+    NUT_SDF_RESOLUTION,
+};
+pub use iso::{FastenerDims, Fit, Iso965Row, IsoSize, ThreadProfile, ThreadSpec, STEEL_DENSITY};
+pub use part::{Part, WrittenPart};
+pub use peg_hole::{peg_hole, PegHole, PegHoleOptions, PegSize, INSERTION_DENSITY};

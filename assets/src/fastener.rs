@@ -1,0 +1,160 @@
+//! Hex nuts and hex bolts with ISO metric threads, in their assembled zero pose.
+//!
+//! Frame (Factory's M16 convention): z is the bolt axis; the bolt head is a hexagonal prism from z = 0 to
+//! the head height, the fully threaded shank runs from there to head + shank length, and the nut sits on
+//! the head (z from head height to head height + nut height) screwed onto the same helix, so every flank
+//! faces its mate across the ISO clearance. Hexagons have a flat normal to +x (corners on +-y), as in
+//! Factory's nut mesh. The bolt head uses the nut's width across flats (Factory's own bolt heads are
+//! round, diameter = width across flats; a hexagon is what a real ISO 4017 bolt has).
+//!
+//! Threads are right-hand, single start: the thread surface is the helical sweep of the ISO 68-1 profile
+//! ([`crate::iso::ThreadProfile`]) sampled on `segments_per_turn` columns, clipped by the end planes and
+//! closed by planar annuli (nut) or disks (bolt tip).
+
+use crate::error::{AssetError, Result};
+use crate::geom::{helical_thread, polygon_wall, Builder};
+use crate::iso::{FastenerDims, Fit, IsoSize, ThreadSpec, STEEL_DENSITY};
+use crate::part::Part;
+
+/// Factory's SDF resolution for nuts (factory_nut_*.urdf).
+pub const NUT_SDF_RESOLUTION: u32 = 256;
+/// Factory's SDF resolution for bolts (factory_bolt_*.urdf).
+pub const BOLT_SDF_RESOLUTION: u32 = 512;
+
+/// Mesh resolution of threaded parts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ThreadOptions {
+    /// Angular columns per turn (a multiple of 12, at least 24, so the hexagon's corners are columns).
+    /// Default 192: M16 nut ~11.6k triangles, bolt ~20.7k.
+    pub segments_per_turn: usize,
+    /// Segments along each flank of the profile (1..=16); flanks are straight, so 1 is exact.
+    pub flank_subdivisions: usize,
+}
+
+impl Default for ThreadOptions {
+    fn default() -> Self {
+        ThreadOptions { segments_per_turn: 192, flank_subdivisions: 1 }
+    }
+}
+
+impl ThreadOptions {
+    /// Checks the ranges documented on the fields.
+    pub fn validate(&self) -> Result<()> {
+        let n = self.segments_per_turn;
+        if n < 24 || n % 12 != 0 || n > 4096 {
+            return Err(AssetError::InvalidOption {
+                name: "segments per turn",
+                value: n.to_string(),
+                expected: "a multiple of 12 from 24 to 4096 (e.g. 96, 192, 384)".into(),
+            });
+        }
+        if !(1..=16).contains(&self.flank_subdivisions) {
+            return Err(AssetError::InvalidOption {
+                name: "flank subdivisions",
+                value: self.flank_subdivisions.to_string(),
+                expected: "1..=16".into(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// An assembled nut and bolt.
+#[derive(Clone, Debug)]
+pub struct NutBolt {
+    /// The hex nut (`nut_<size>_<fit>`), z from head height to head height + nut height [m].
+    pub nut: Part,
+    /// The hex bolt (`bolt_<size>_<fit>`), z from 0 to head height + shank length [m].
+    pub bolt: Part,
+    /// Thread geometry, both parts' diameters and the clearances between them.
+    pub spec: ThreadSpec,
+    /// Nut height, width across flats, head height, shank length [m].
+    pub dims: FastenerDims,
+    /// Thread pitch [m] (= `spec.pitch`).
+    pub pitch: f32,
+    /// Height of a bolt tooth centre at angle 0 [m]: tooth centres lie on z = phase + P (theta/2pi + m).
+    pub thread_phase: f32,
+}
+
+/// Builds the nut and bolt of `size` at end `fit` of class 6H/6g, in the assembled zero pose.
+pub fn nut_bolt(size: IsoSize, fit: Fit, opts: &ThreadOptions) -> Result<NutBolt> {
+    opts.validate()?;
+    let spec = ThreadSpec::new(size, fit);
+    let dims = size.factory_dims();
+    let n = opts.segments_per_turn;
+    let apothem = 0.5 * dims.width_across_flats;
+    let (head, top) = (dims.head_height, dims.head_height + dims.shank_length);
+    let (nut_lo, nut_hi) = (dims.head_height, dims.head_height + dims.nut_height);
+    // A tooth centre at (theta = 0, z = head height); shared by nut and bolt, which puts them in phase.
+    let phase = head;
+
+    let bolt_profile = spec.bolt_profile();
+    let nut_profile = spec.nut_profile();
+    let bolt_breaks = bolt_profile.breakpoints(opts.flank_subdivisions)?;
+    let nut_breaks = nut_profile.breakpoints(opts.flank_subdivisions)?;
+
+    let mut b = Builder::default();
+    let (head_bottom, head_top) = b.side(&polygon_wall(6, apothem, 0.0, head, n), true);
+    b.disk(&head_bottom, 0.0, false);
+    let (shank_bottom, shank_top) = b.side(&helical_thread(&bolt_profile, &bolt_breaks, n, phase, head, top), true);
+    b.annulus(&shank_bottom, &head_top, true);
+    b.disk(&shank_top, top, true);
+    let bolt_mesh = b.finish();
+
+    let mut b = Builder::default();
+    let (hex_bottom, hex_top) = b.side(&polygon_wall(6, apothem, nut_lo, nut_hi, n), true);
+    let (bore_bottom, bore_top) = b.side(&helical_thread(&nut_profile, &nut_breaks, n, phase, nut_lo, nut_hi), false);
+    b.annulus(&bore_bottom, &hex_bottom, false);
+    b.annulus(&bore_top, &hex_top, true);
+    let nut_mesh = b.finish();
+
+    let tag = format!("{}_{}", size.name().to_lowercase(), fit.name());
+    Ok(NutBolt {
+        nut: Part::new(format!("nut_{tag}"), nut_mesh, STEEL_DENSITY, NUT_SDF_RESOLUTION),
+        bolt: Part::new(format!("bolt_{tag}"), bolt_mesh, STEEL_DENSITY, BOLT_SDF_RESOLUTION),
+        spec,
+        dims,
+        pitch: spec.pitch as f32,
+        thread_phase: phase as f32,
+    })
+}
+
+/// Closed-form nut volume [m^3]: hexagon area x h - h x pi x mean over one pitch of r(u)^2, with r the
+/// nut's bore profile (a helical bore has the same cross-section area at every height).
+pub fn nut_closed_form_volume(spec: &ThreadSpec, dims: &FastenerDims) -> f64 {
+    let h = dims.nut_height;
+    h * (dims.hexagon_area() - std::f64::consts::PI * spec.nut_profile().mean_square_radius())
+}
+
+/// Closed-form bolt volume [m^3]: hexagonal head plus the threaded core, pi x mean r(u)^2 x shank length.
+pub fn bolt_closed_form_volume(spec: &ThreadSpec, dims: &FastenerDims) -> f64 {
+    dims.hexagon_area() * dims.head_height
+        + std::f64::consts::PI * spec.bolt_profile().mean_square_radius() * dims.shank_length
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn options_are_validated() {
+        let base = ThreadOptions::default();
+        assert!(base.validate().is_ok());
+        for bad in [ThreadOptions { segments_per_turn: 100, ..base }, ThreadOptions { segments_per_turn: 12, ..base }] {
+            let e = nut_bolt(IsoSize::M8, Fit::Tight, &bad).unwrap_err().to_string();
+            assert!(e.contains("multiple of 12"), "{e}");
+        }
+        let e = ThreadOptions { flank_subdivisions: 0, ..base }.validate().unwrap_err().to_string();
+        assert!(e.contains("1..=16"), "{e}");
+    }
+
+    #[test]
+    fn coarse_m8_is_closed_with_flank_subdivisions() {
+        let opts = ThreadOptions { segments_per_turn: 48, flank_subdivisions: 3 };
+        let nb = nut_bolt(IsoSize::M8, Fit::Loose, &opts).unwrap();
+        for part in [&nb.nut, &nb.bolt] {
+            assert!(part.mesh.topology().is_watertight(), "{} {:?}", part.name, part.mesh.topology());
+            assert!(part.mesh.signed_volume() > 0.0);
+        }
+    }
+}
