@@ -9,5 +9,8 @@ pub mod error;
 pub mod mesh;
 
 pub use error::{EngineError, Result};
+pub mod contact;
 pub mod fsutil;
+pub mod gpu;
 pub mod sdf;
+pub mod urdf;

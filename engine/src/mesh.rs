@@ -74,7 +74,9 @@ impl TriMesh {
         if self.positions.is_empty() {
             return (Vec3::ZERO, Vec3::ZERO);
         }
-        self.positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+        self.positions
+            .iter()
+            .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
     }
 
     /// Returns a copy with every vertex mapped by `f` (scale, transform).
@@ -121,7 +123,8 @@ impl TriMesh {
         let mut topo = Topology::default();
         for (t, tri) in self.triangles.iter().enumerate() {
             let [a, b, c] = self.triangle(t);
-            if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] || (b - a).cross(c - a).length_squared() == 0.0 {
+            if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] || (b - a).cross(c - a).length_squared() == 0.0
+            {
                 topo.degenerate_triangles += 1;
             }
             for k in 0..3 {
@@ -209,8 +212,11 @@ impl TriMesh {
                 Some("v") => {
                     let mut c = [0.0f32; 3];
                     for (k, slot) in c.iter_mut().enumerate() {
-                        let tok = it.next().ok_or_else(|| err(line_no, format!("vertex needs 3 coordinates, found {k}")))?;
-                        *slot = tok.parse().map_err(|_| err(line_no, format!("vertex coordinate {tok:?} is not a number")))?;
+                        let tok =
+                            it.next().ok_or_else(|| err(line_no, format!("vertex needs 3 coordinates, found {k}")))?;
+                        *slot = tok
+                            .parse()
+                            .map_err(|_| err(line_no, format!("vertex coordinate {tok:?} is not a number")))?;
                         if !slot.is_finite() {
                             return Err(err(line_no, format!("vertex coordinate {tok:?} is not finite")));
                         }
@@ -230,10 +236,16 @@ impl TriMesh {
                 .iter()
                 .map(|tok| {
                     let first = tok.split('/').next().unwrap_or("");
-                    let v: i64 = first.parse().map_err(|_| err(line_no, format!("face index {tok:?} is not an integer")))?;
+                    let v: i64 =
+                        first.parse().map_err(|_| err(line_no, format!("face index {tok:?} is not an integer")))?;
                     let resolved = if v < 0 { n + v } else { v - 1 };
                     if v == 0 || resolved < 0 || resolved >= n {
-                        return Err(err(line_no, format!("face index {v} out of range: the file has {n} vertices (valid 1..={n} or -{n}..=-1)")));
+                        return Err(err(
+                            line_no,
+                            format!(
+                                "face index {v} out of range: the file has {n} vertices (valid 1..={n} or -{n}..=-1)"
+                            ),
+                        ));
                     }
                     Ok(resolved as u32)
                 })
@@ -243,7 +255,10 @@ impl TriMesh {
             }
         }
         if mesh.triangles.is_empty() {
-            return Err(EngineError::Asset { path: path.to_path_buf(), message: "no faces: an OBJ mesh needs at least one `f` record".into() });
+            return Err(EngineError::Asset {
+                path: path.to_path_buf(),
+                message: "no faces: an OBJ mesh needs at least one `f` record".into(),
+            });
         }
         Ok(mesh)
     }
@@ -275,15 +290,27 @@ fn outer(a: DVec3, b: DVec3) -> DMat3 {
 /// Axis-aligned box of half extents `h` centred at the origin, 12 outward-wound triangles.
 pub fn box_mesh(h: Vec3) -> TriMesh {
     let positions = (0..8)
-        .map(|i| Vec3::new(if i & 1 == 0 { -h.x } else { h.x }, if i & 2 == 0 { -h.y } else { h.y }, if i & 4 == 0 { -h.z } else { h.z }))
+        .map(|i| {
+            Vec3::new(
+                if i & 1 == 0 { -h.x } else { h.x },
+                if i & 2 == 0 { -h.y } else { h.y },
+                if i & 4 == 0 { -h.z } else { h.z },
+            )
+        })
         .collect();
     let triangles = vec![
-        [0, 2, 3], [0, 3, 1], // -z
-        [4, 5, 7], [4, 7, 6], // +z
-        [0, 1, 5], [0, 5, 4], // -y
-        [2, 6, 7], [2, 7, 3], // +y
-        [0, 4, 6], [0, 6, 2], // -x
-        [1, 3, 7], [1, 7, 5], // +x
+        [0, 2, 3],
+        [0, 3, 1], // -z
+        [4, 5, 7],
+        [4, 7, 6], // +z
+        [0, 1, 5],
+        [0, 5, 4], // -y
+        [2, 6, 7],
+        [2, 7, 3], // +y
+        [0, 4, 6],
+        [0, 6, 2], // -x
+        [1, 3, 7],
+        [1, 7, 5], // +x
     ];
     TriMesh { positions, triangles }
 }
@@ -338,7 +365,8 @@ mod tests {
         assert!(s.starts_with("bad.obj:3:") && s.contains("out of range"), "{s}");
         let e = TriMesh::parse_obj("v 0 zero 0\n", Path::new("x.obj")).unwrap_err().to_string();
         assert!(e.starts_with("x.obj:1:"), "{e}");
-        let quad = TriMesh::parse_obj("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1/1/1 2/2/2 3/3/3 -1\n", Path::new("q")).unwrap();
+        let quad =
+            TriMesh::parse_obj("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1/1/1 2/2/2 3/3/3 -1\n", Path::new("q")).unwrap();
         assert_eq!(quad.triangles, vec![[0, 1, 2], [0, 2, 3]]);
     }
 }

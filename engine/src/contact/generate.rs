@@ -1,0 +1,302 @@
+//! Contact generation kernel (generate.wgsl): pipeline, dispatch, and its CPU twin [`generate_cpu`].
+
+use super::model::{FlatModel, JobGpu, PairGpu, ParamsGpu, PatchGpu, EMPTY_DEPTH};
+use super::reduce::{Candidate, Reducer, BATCH};
+use super::ContactConfig;
+use glam::{Vec3, Vec4};
+
+pub(crate) const COMMON_WGSL: &str = include_str!("common.wgsl");
+pub(crate) const GENERATE_WGSL: &str = include_str!("generate.wgsl");
+
+/// The WGSL module of a kernel with the patch budget substituted.
+pub fn shader_source(kernel_wgsl: &str, max_patches: u32) -> String {
+    format!("{}\n{}", COMMON_WGSL.replace("MAX_PATCHES_VALUE", &format!("{max_patches}u")), kernel_wgsl)
+}
+
+/// Builds a compute pipeline from WGSL with an automatic layout.
+pub(crate) fn compute_pipeline(device: &wgpu::Device, label: &str, source: &str, entry: &str) -> wgpu::ComputePipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        module: &module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+/// The generation pipeline.
+pub struct GenerateKernel {
+    pub pipeline: wgpu::ComputePipeline,
+}
+
+impl GenerateKernel {
+    pub fn new(device: &wgpu::Device, cfg: &ContactConfig) -> Self {
+        GenerateKernel {
+            pipeline: compute_pipeline(
+                device,
+                "contact-generate",
+                &shader_source(GENERATE_WGSL, cfg.max_patches),
+                "generate",
+            ),
+        }
+    }
+
+    /// Records one dispatch: `job_count` x `world_count` workgroups.
+    pub fn dispatch(
+        &self,
+        pass: &mut wgpu::ComputePass,
+        groups: [&wgpu::BindGroup; 3],
+        job_count: u32,
+        world_count: u32,
+    ) {
+        pass.set_pipeline(&self.pipeline);
+        for (i, g) in groups.iter().enumerate() {
+            pass.set_bind_group(i as u32, *g, &[]);
+        }
+        pass.dispatch_workgroups(job_count, world_count, 1);
+    }
+}
+
+// --- CPU twin: the same float operations as generate.wgsl, in the same order. ---
+
+fn quat_rotate(q: Vec4, v: Vec3) -> Vec3 {
+    let u = q.truncate();
+    let t = 2.0 * u.cross(v);
+    v + q.w * t + u.cross(t)
+}
+
+fn quat_mul(a: Vec4, b: Vec4) -> Vec4 {
+    let (au, bu) = (a.truncate(), b.truncate());
+    (a.w * bu + b.w * au + au.cross(bu)).extend(a.w * b.w - au.dot(bu))
+}
+
+/// A rigid transform as the kernels store it: position and quaternion (x, y, z, w).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Xf {
+    pub p: Vec3,
+    pub q: Vec4,
+}
+
+impl Xf {
+    pub const IDENTITY: Xf = Xf { p: Vec3::ZERO, q: Vec4::new(0.0, 0.0, 0.0, 1.0) };
+    pub fn mul(&self, b: &Xf) -> Xf {
+        Xf { p: self.p + quat_rotate(self.q, b.p), q: quat_mul(self.q, b.q) }
+    }
+    pub fn inv(&self) -> Xf {
+        let qi = Vec4::new(-self.q.x, -self.q.y, -self.q.z, self.q.w);
+        Xf { p: -quat_rotate(qi, self.p), q: qi }
+    }
+    pub fn point(&self, v: Vec3) -> Vec3 {
+        self.p + quat_rotate(self.q, v)
+    }
+    pub fn rotate(&self, v: Vec3) -> Vec3 {
+        quat_rotate(self.q, v)
+    }
+    fn from_arrays(p: [f32; 4], q: [f32; 4]) -> Xf {
+        Xf { p: Vec3::new(p[0], p[1], p[2]), q: Vec4::from_array(q) }
+    }
+}
+
+/// Signed distance and gradient of the pair's SDF shape at `p` (shape frame), as `sdf_sample` in WGSL.
+pub fn sdf_sample_cpu(pair: &PairGpu, sdf_values: &[f32], p: Vec3) -> (f32, Vec3) {
+    if pair.sdf_kind == 1 {
+        return (p.z, Vec3::Z);
+    }
+    let lo = Vec3::new(pair.sdf_origin[0], pair.sdf_origin[1], pair.sdf_origin[2]);
+    let h = pair.sdf_origin[3];
+    let dims = glam::UVec3::new(pair.sdf_dims[0], pair.sdf_dims[1], pair.sdf_dims[2]);
+    let at = |i: u32, j: u32, k: u32| sdf_values[(pair.sdf_dims[3] + i + dims.x * (j + dims.y * k)) as usize];
+    let hi = lo + h * (dims - glam::UVec3::ONE).as_vec3();
+    let q = p.clamp(lo, hi);
+    let g = (q - lo) / h;
+    let cell = g.floor().as_uvec3().min(dims - glam::UVec3::splat(2));
+    let f = g - cell.as_vec3();
+    let (x, y, z) = (cell.x, cell.y, cell.z);
+    let (c000, c100, c010, c110) = (at(x, y, z), at(x + 1, y, z), at(x, y + 1, z), at(x + 1, y + 1, z));
+    let (c001, c101, c011, c111) = (at(x, y, z + 1), at(x + 1, y, z + 1), at(x, y + 1, z + 1), at(x + 1, y + 1, z + 1));
+    let x00 = c000 + (c100 - c000) * f.x;
+    let x10 = c010 + (c110 - c010) * f.x;
+    let x01 = c001 + (c101 - c001) * f.x;
+    let x11 = c011 + (c111 - c011) * f.x;
+    let y0 = x00 + (x10 - x00) * f.y;
+    let y1 = x01 + (x11 - x01) * f.y;
+    let d = y0 + (y1 - y0) * f.z;
+    let ya = (c100 - c000) + ((c110 - c010) - (c100 - c000)) * f.y;
+    let yb = (c101 - c001) + ((c111 - c011) - (c101 - c001)) * f.y;
+    let dx = ya + (yb - ya) * f.z;
+    let dy = (x10 - x00) + ((x11 - x01) - (x10 - x00)) * f.z;
+    let dz = y1 - y0;
+    let out = p - q;
+    let out_len = out.length();
+    if out_len > 0.0 {
+        (d + out_len, out / out_len)
+    } else {
+        (d, Vec3::new(dx, dy, dz) / h)
+    }
+}
+
+/// Point of least signed distance on triangle (a, b, c) and the sample there (`minimise_on_triangle`).
+pub fn minimise_on_triangle_cpu(
+    pair: &PairGpu,
+    sdf: &[f32],
+    a: Vec3,
+    b: Vec3,
+    c: Vec3,
+    iterations: u32,
+) -> (Vec3, (f32, Vec3)) {
+    let (e1, e2) = (b - a, c - a);
+    let (g11, g12, g22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let det = g11 * g22 - g12 * g12;
+    let mut uv = glam::Vec2::splat(1.0 / 3.0);
+    let mut x = a + uv.x * e1 + uv.y * e2;
+    let mut s = sdf_sample_cpu(pair, sdf, x);
+    for corner in [glam::Vec2::ZERO, glam::Vec2::X, glam::Vec2::Y] {
+        let xi = a + corner.x * e1 + corner.y * e2;
+        let si = sdf_sample_cpu(pair, sdf, xi);
+        if si.0 < s.0 {
+            (uv, x, s) = (corner, xi, si);
+        }
+    }
+    let longest = g11.max(g22.max((c - b).dot(c - b)));
+    if longest <= 0.0 {
+        return (x, s);
+    }
+    let planar = det > 1.0e-6 * g11 * g22;
+    let seg = if g11 >= g22 { e1 } else { e2 };
+    let seg_len2 = g11.max(g22);
+    let mut step = 0.5 * longest.sqrt();
+    for _ in 0..iterations {
+        let (duv, dw) = if planar {
+            let (r1, r2) = (-e1.dot(s.1), -e2.dot(s.1));
+            let duv = glam::Vec2::new((g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det);
+            (duv, duv.x * e1 + duv.y * e2)
+        } else {
+            let t = -seg.dot(s.1) / seg_len2;
+            (if g11 >= g22 { glam::Vec2::new(t, 0.0) } else { glam::Vec2::new(0.0, t) }, t * seg)
+        };
+        let len = dw.length();
+        if len <= 0.0 {
+            break;
+        }
+        let mut nuv = (uv + duv * (step / len)).max(glam::Vec2::ZERO);
+        let sum = nuv.x + nuv.y;
+        if sum > 1.0 {
+            nuv /= sum;
+        }
+        let nx = a + nuv.x * e1 + nuv.y * e2;
+        let ns = sdf_sample_cpu(pair, sdf, nx);
+        if ns.0 < s.0 {
+            (uv, x, s) = (nuv, nx, ns);
+            step *= 1.5;
+        } else {
+            step *= 0.5;
+        }
+    }
+    (x, s)
+}
+
+/// The candidate of one query triangle given in the SDF shape's frame (or EMPTY), as in `generate`.
+pub fn triangle_candidate_cpu(pair: &PairGpu, sdf: &[f32], a: Vec3, b: Vec3, c: Vec3, iterations: u32) -> Candidate {
+    let centroid = (a + b + c) / 3.0;
+    let reach = (a - centroid)
+        .dot(a - centroid)
+        .max((b - centroid).dot(b - centroid).max((c - centroid).dot(c - centroid)))
+        .sqrt();
+    let sc = sdf_sample_cpu(pair, sdf, centroid);
+    let slack = if pair.sdf_kind == 1 { 0.0 } else { pair.sdf_origin[3] };
+    if sc.0 - reach - pair.radius - slack > pair.contact_offset {
+        return Candidate::EMPTY;
+    }
+    let (x, (d, g)) = minimise_on_triangle_cpu(pair, sdf, a, b, c, iterations);
+    let depth = d - pair.radius;
+    let glen = g.length();
+    if !(depth < pair.contact_offset && glen > 0.0) {
+        return Candidate::EMPTY;
+    }
+    let n = g / glen;
+    let area = 0.5 * (b - a).cross(c - a).length();
+    let units = ((area / pair.area_unit).round() as u32).max(1);
+    Candidate { pd: (x - pair.radius * n).extend(depth), n: n.extend(units as f32) }
+}
+
+/// Output of one generation job: its patches (world frame) and how many candidates it produced.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct JobOutput {
+    pub patches: Vec<PatchGpu>,
+    pub candidates: u32,
+}
+
+/// Pose of a shape in the world: body pose (or identity for NO_BODY) times the shape's local pose.
+pub fn shape_world(body_q: &[Xf], body_count: u32, world: u32, body: u32, pos: [f32; 4], rot: [f32; 4]) -> Xf {
+    let body_pose =
+        if body == super::model::NO_BODY { Xf::IDENTITY } else { body_q[(world * body_count + body) as usize] };
+    body_pose.mul(&Xf::from_arrays(pos, rot))
+}
+
+/// CPU twin of one generate workgroup: job `job` in world `world`.
+pub fn generate_job_cpu(
+    flat: &FlatModel,
+    job: &JobGpu,
+    body_q: &[Xf],
+    body_count: u32,
+    world: u32,
+    cfg: &ContactConfig,
+) -> JobOutput {
+    let pair = &flat.pairs[job.pair as usize];
+    let world_a = shape_world(body_q, body_count, world, pair.body_a, pair.a_pos, pair.a_rot);
+    let world_b = shape_world(body_q, body_count, world, pair.body_b, pair.b_pos, pair.b_rot);
+    let b_from_a = world_b.inv().mul(&world_a);
+    let mut red = Reducer::new(cfg.max_patches);
+    let mut found = 0;
+    let mut base = 0;
+    while base < job.tri_count {
+        let n = (job.tri_count - base).min(BATCH as u32);
+        let cands: Vec<Candidate> = (0..n)
+            .map(|t| {
+                let v = ((job.tri_first + base + t) * 3) as usize;
+                let corner = |k: usize| b_from_a.point(Vec4::from_array(flat.tri_verts[v + k]).truncate());
+                triangle_candidate_cpu(pair, &flat.sdf_values, corner(0), corner(1), corner(2), cfg.iterations)
+            })
+            .collect();
+        found += cands.iter().filter(|c| c.pd.w < 1e38).count() as u32;
+        red.reduce_batch(&cands, cfg.normal_cos, pair.contact_offset, pair.min_separation);
+        base += BATCH as u32;
+    }
+    let patches = red
+        .patches(pair.area_unit)
+        .into_iter()
+        .map(|mut p| {
+            let n = world_b.rotate(Vec3::new(p.normal[0], p.normal[1], p.normal[2]));
+            p.normal = [n.x, n.y, n.z, p.normal[3]];
+            for s in p.slots.iter_mut() {
+                if s[3] < 1e38 {
+                    let w = world_b.point(Vec3::new(s[0], s[1], s[2]));
+                    *s = [w.x, w.y, w.z, s[3]];
+                } else {
+                    *s = [0.0, 0.0, 0.0, EMPTY_DEPTH];
+                }
+            }
+            p
+        })
+        .collect();
+    JobOutput { patches, candidates: found }
+}
+
+/// Parameters uniform for a model and world count.
+pub fn params(flat: &FlatModel, body_count: u32, world_count: u32, cfg: &ContactConfig) -> ParamsGpu {
+    ParamsGpu {
+        world_count,
+        body_count,
+        pair_count: flat.pairs.len() as u32,
+        job_count: flat.jobs.len() as u32,
+        normal_cos: cfg.normal_cos,
+        iterations: cfg.iterations,
+        world_offset: 0,
+        _pad: 0,
+    }
+}

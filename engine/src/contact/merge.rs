@@ -1,0 +1,66 @@
+//! Patch merge kernel (merge.wgsl): combines a pair's per-job patches; CPU twin [`merge_cpu`].
+
+use super::generate::{compute_pipeline, shader_source};
+use super::model::{PairGpu, PatchGpu};
+use super::reduce::{Candidate, Reducer, BATCH};
+use super::ContactConfig;
+use glam::Vec4;
+
+pub(crate) const MERGE_WGSL: &str = include_str!("merge.wgsl");
+
+/// The merge pipeline.
+pub struct MergeKernel {
+    pub pipeline: wgpu::ComputePipeline,
+}
+
+impl MergeKernel {
+    pub fn new(device: &wgpu::Device, cfg: &ContactConfig) -> Self {
+        MergeKernel {
+            pipeline: compute_pipeline(device, "contact-merge", &shader_source(MERGE_WGSL, cfg.max_patches), "merge"),
+        }
+    }
+
+    /// Records one dispatch: `pair_count` x `world_count` workgroups.
+    pub fn dispatch(
+        &self,
+        pass: &mut wgpu::ComputePass,
+        groups: [&wgpu::BindGroup; 3],
+        pair_count: u32,
+        world_count: u32,
+    ) {
+        pass.set_pipeline(&self.pipeline);
+        for (i, g) in groups.iter().enumerate() {
+            pass.set_bind_group(i as u32, *g, &[]);
+        }
+        pass.dispatch_workgroups(pair_count, world_count, 1);
+    }
+}
+
+/// CPU twin of one merge workgroup: the pair's job outputs in job order.
+pub fn merge_cpu(pair: &PairGpu, job_patches: &[&[PatchGpu]], cfg: &ContactConfig) -> Vec<PatchGpu> {
+    let mut red = Reducer::new(cfg.max_patches);
+    for patches in job_patches {
+        let count = patches.len() * 4;
+        let mut base = 0;
+        while base < count {
+            let cands: Vec<Candidate> = (base..(base + BATCH).min(count))
+                .map(|i| {
+                    let p = &patches[i / 4];
+                    let sl = p.slots[i % 4];
+                    if sl[3] >= 1e38 {
+                        return Candidate::EMPTY;
+                    }
+                    let used = p.slots.iter().filter(|s| s[3] < 1e38).count() as u32;
+                    let units = p.normal[3] / (used as f32 * pair.area_unit);
+                    Candidate {
+                        pd: Vec4::from_array(sl),
+                        n: Vec4::new(p.normal[0], p.normal[1], p.normal[2], (units.round() as u32).max(1) as f32),
+                    }
+                })
+                .collect();
+            red.reduce_batch(&cands, cfg.normal_cos, pair.contact_offset, pair.min_separation);
+            base += BATCH;
+        }
+    }
+    red.patches(pair.area_unit)
+}

@@ -1,0 +1,56 @@
+// Second level of contact reduction: one workgroup per (pair, world) reads the patches that
+// generate.wgsl wrote for the pair's jobs, treats their contacts as candidates (with the patch normal and
+// an equal share of its area), and runs the same reduction (common.wgsl) into at most MAX_PATCHES patches.
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> pairs: array<Pair>;
+@group(1) @binding(0) var<storage, read> job_patches: array<PatchOut>;
+@group(1) @binding(1) var<storage, read> job_patch_count: array<u32>;
+@group(2) @binding(0) var<storage, read_write> patches: array<PatchOut>;
+@group(2) @binding(1) var<storage, read_write> patch_counts: array<u32>;
+
+@compute @workgroup_size(256)
+fn merge(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
+    let pair_index = wid.x;
+    let world = wid.y + params.world_offset;
+    let pair = pairs[pair_index];
+    reset_patches(lid);
+    let job_base = world * params.job_count + pair.job_first;
+    for (var j = 0u; j < pair.job_count; j++) {
+        let count = job_patch_count[job_base + j] * 4u;
+        for (var base = 0u; base < count; base += WG) {
+            var cand = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
+            var normal = vec4<f32>(0.0);
+            let i = base + lid;
+            if (i < count) {
+                let p = job_patches[(job_base + j) * MAX_PATCHES + i / 4u];
+                let sl = p.slots[i % 4u];
+                if (sl.w < VALID_BELOW) {
+                    var used = 0u;
+                    for (var s = 0u; s < 4u; s++) {
+                        used += select(0u, 1u, p.slots[s].w < VALID_BELOW);
+                    }
+                    cand = sl;
+                    let units = p.normal.w / (f32(used) * pair.area_unit);
+                    normal = vec4<f32>(p.normal.xyz, f32(max(1u, u32(round(units)))));
+                }
+            }
+            cand_pd[lid] = cand;
+            cand_n[lid] = normal;
+            reduce_batch(lid, params.normal_cos, pair.contact_offset, pair.min_separation);
+        }
+    }
+    let pc = workgroupUniformLoad(&patch_count);
+    let out_base = (world * params.pair_count + pair_index) * MAX_PATCHES;
+    if (lid < pc) {
+        var o: PatchOut;
+        o.normal = vec4<f32>(patch_n[lid].xyz, f32(atomicLoad(&patch_area[lid])) * pair.area_unit);
+        for (var s = 0u; s < 4u; s++) {
+            o.slots[s] = patch_slot[lid * 4u + s];
+        }
+        patches[out_base + lid] = o;
+    }
+    if (lid == 0u) {
+        patch_counts[world * params.pair_count + pair_index] = pc;
+    }
+}

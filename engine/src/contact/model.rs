@@ -1,0 +1,278 @@
+//! Host description of the shape pairs to collide, flattened into the GPU layout of common.wgsl.
+//! Meshes and SDF grids are stored once and shared by every world; only body poses are per world.
+
+use crate::error::{EngineError, Result};
+use crate::mesh::TriMesh;
+use crate::sdf::SdfGrid;
+use bytemuck::{Pod, Zeroable};
+use glam::{Quat, Vec3};
+use std::sync::Arc;
+
+/// Marks a shape fixed in the world frame (no body).
+pub const NO_BODY: u32 = u32::MAX;
+
+/// The shape providing the signed distance.
+#[derive(Clone, Debug)]
+pub enum SdfShape {
+    /// A baked grid in the shape frame.
+    Grid(Arc<SdfGrid>),
+    /// The half-space z <= 0 of the shape frame (a table or ground plane; normal +z).
+    Plane,
+}
+
+/// The shape whose triangles are queried: triangles in the shape frame [m] plus a radius [m].
+#[derive(Clone, Debug)]
+pub struct QueryShape {
+    /// Corners of each query triangle, shape frame [m].
+    pub triangles: Vec<[Vec3; 3]>,
+    /// Radius around the triangles [m] (0 for meshes and boxes).
+    pub radius: f32,
+}
+
+impl QueryShape {
+    /// A triangle mesh.
+    pub fn mesh(mesh: &TriMesh) -> Self {
+        QueryShape { triangles: (0..mesh.triangle_count()).map(|t| mesh.triangle(t)).collect(), radius: 0.0 }
+    }
+    /// A box of half extents `h` [m] centred at the shape origin: its 12 face triangles, plus its 8
+    /// corners as point queries so that a face lying flat on a surface reports exactly its corners.
+    pub fn cuboid(h: Vec3) -> Self {
+        let mesh = crate::mesh::box_mesh(h);
+        let mut q = Self::mesh(&mesh);
+        q.triangles.extend(mesh.positions.iter().map(|p| [*p; 3]));
+        q
+    }
+    /// A sphere of `radius` [m] at the shape origin.
+    pub fn sphere(radius: f32) -> Self {
+        QueryShape { triangles: vec![[Vec3::ZERO; 3]], radius }
+    }
+    /// A capsule along z: segment of `half_length` [m] each side of the origin, `radius` [m].
+    pub fn capsule(radius: f32, half_length: f32) -> Self {
+        let (p, q) = (Vec3::new(0.0, 0.0, -half_length), Vec3::new(0.0, 0.0, half_length));
+        QueryShape { triangles: vec![[p, q, q]], radius }
+    }
+}
+
+/// One shape pair: which bodies carry the shapes, where the shapes sit on them, and contact settings.
+#[derive(Clone, Debug)]
+pub struct PairSpec {
+    /// Body carrying the query shape (index within a world) or [`NO_BODY`].
+    pub body_a: u32,
+    /// Query shape pose in body a's frame (position [m], rotation).
+    pub a_pose: (Vec3, Quat),
+    pub query: Arc<QueryShape>,
+    /// Body carrying the SDF shape or [`NO_BODY`].
+    pub body_b: u32,
+    /// SDF shape pose in body b's frame.
+    pub b_pose: (Vec3, Quat),
+    pub sdf: SdfShape,
+    /// Candidates farther apart than this are ignored [m].
+    pub contact_offset: f32,
+}
+
+/// GPU mirror of `Pair` in common.wgsl (144 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable, PartialEq)]
+pub struct PairGpu {
+    pub a_pos: [f32; 4],
+    pub a_rot: [f32; 4],
+    pub b_pos: [f32; 4],
+    pub b_rot: [f32; 4],
+    /// SDF grid origin xyz [m], spacing w [m].
+    pub sdf_origin: [f32; 4],
+    /// SDF dims xyz, offset of the first value in `sdf_values` w.
+    pub sdf_dims: [u32; 4],
+    pub body_a: u32,
+    pub body_b: u32,
+    pub tri_first: u32,
+    pub tri_count: u32,
+    /// 0: grid, 1: half-space z <= 0.
+    pub sdf_kind: u32,
+    pub job_first: u32,
+    pub job_count: u32,
+    pub _pad: u32,
+    pub contact_offset: f32,
+    pub radius: f32,
+    /// Area quantum for the patch measure [m^2].
+    pub area_unit: f32,
+    /// Minimum distance between two contacts of a patch [m].
+    pub min_separation: f32,
+}
+
+/// GPU mirror of `Job` in generate.wgsl: a run of query triangles of one pair.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable, PartialEq, Eq)]
+pub struct JobGpu {
+    pub pair: u32,
+    pub tri_first: u32,
+    pub tri_count: u32,
+    pub slot: u32,
+}
+
+/// GPU mirror of `Params` in common.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable, PartialEq)]
+pub struct ParamsGpu {
+    pub world_count: u32,
+    pub body_count: u32,
+    pub pair_count: u32,
+    pub job_count: u32,
+    pub normal_cos: f32,
+    pub iterations: u32,
+    pub world_offset: u32,
+    pub _pad: u32,
+}
+
+/// GPU mirror of `PatchOut`: normal xyz + area w, then 4 slots of point xyz + depth w (3e38 = empty).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable, PartialEq)]
+pub struct PatchGpu {
+    pub normal: [f32; 4],
+    pub slots: [[f32; 4]; 4],
+}
+
+/// Depth written into empty slots.
+pub const EMPTY_DEPTH: f32 = 3.0e38;
+
+/// Flattened pairs, triangles and SDF values, shared by all worlds.
+#[derive(Clone, Debug, Default)]
+pub struct ContactModel {
+    /// Bodies per world (poses are `body_q[world * body_count + body]`).
+    pub body_count: u32,
+    pub pairs: Vec<PairSpec>,
+}
+
+/// The flat arrays uploaded to the GPU (and read by the CPU twin).
+#[derive(Clone, Debug, Default)]
+pub struct FlatModel {
+    pub pairs: Vec<PairGpu>,
+    pub jobs: Vec<JobGpu>,
+    /// Triangle corners, 3 per triangle, xyz [m] (w unused), shape [triangle_count * 3].
+    pub tri_verts: Vec<[f32; 4]>,
+    /// All SDF grids' values [m], concatenated.
+    pub sdf_values: Vec<f32>,
+}
+
+fn pose4(p: Vec3) -> [f32; 4] {
+    [p.x, p.y, p.z, 0.0]
+}
+
+fn quat4(q: Quat) -> [f32; 4] {
+    let q = q.normalize();
+    [q.x, q.y, q.z, q.w]
+}
+
+impl ContactModel {
+    /// Flattens the model; `chunk` query triangles per job (a multiple of 256).
+    pub fn flatten(&self, chunk: u32) -> Result<FlatModel> {
+        let mut flat = FlatModel::default();
+        let mut query_first: Vec<(*const QueryShape, u32)> = Vec::new();
+        let mut grid_offset: Vec<(*const SdfGrid, u32)> = Vec::new();
+        for (i, p) in self.pairs.iter().enumerate() {
+            for (field, body) in [("body_a", p.body_a), ("body_b", p.body_b)] {
+                if body != NO_BODY && body >= self.body_count {
+                    return Err(EngineError::Config {
+                        field,
+                        value: format!("{body} (pair {i})"),
+                        expected: format!("a body index below body_count = {} or NO_BODY", self.body_count),
+                    });
+                }
+            }
+            if !(p.contact_offset.is_finite() && p.contact_offset >= 0.0) {
+                return Err(EngineError::Config {
+                    field: "contact_offset",
+                    value: format!("{} (pair {i})", p.contact_offset),
+                    expected: "a finite distance >= 0 [m]".into(),
+                });
+            }
+            // Shared query shapes are uploaded once.
+            let key = Arc::as_ptr(&p.query);
+            let tri_first = match query_first.iter().find(|(k, _)| *k == key) {
+                Some(&(_, f)) => f,
+                None => {
+                    let f = (flat.tri_verts.len() / 3) as u32;
+                    for t in &p.query.triangles {
+                        flat.tri_verts.extend(t.iter().map(|v| pose4(*v)));
+                    }
+                    query_first.push((key, f));
+                    f
+                }
+            };
+            let tri_count = p.query.triangles.len() as u32;
+            let (sdf_kind, sdf_origin, sdf_dims) = match &p.sdf {
+                SdfShape::Plane => (1u32, [0.0; 4], [2, 2, 2, 0]),
+                SdfShape::Grid(g) => {
+                    let key = Arc::as_ptr(g);
+                    let off = match grid_offset.iter().find(|(k, _)| *k == key) {
+                        Some(&(_, o)) => o,
+                        None => {
+                            let o = flat.sdf_values.len() as u32;
+                            flat.sdf_values.extend_from_slice(&g.values);
+                            grid_offset.push((key, o));
+                            o
+                        }
+                    };
+                    (0, [g.origin.x, g.origin.y, g.origin.z, g.spacing], [g.dims.x, g.dims.y, g.dims.z, off])
+                }
+            };
+            // Area quantum: 1/64 of the mean triangle area, so patch measures resolve small triangles.
+            let total_area: f32 =
+                p.query.triangles.iter().map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length()).sum();
+            let mean_area = total_area / tri_count.max(1) as f32;
+            let area_unit = if mean_area > 0.0 { mean_area / 64.0 } else { 1e-12 };
+            let mean_edge = (2.0 * mean_area).sqrt();
+            let job_first = flat.jobs.len() as u32;
+            let mut start = 0;
+            while start < tri_count {
+                let n = chunk.min(tri_count - start);
+                flat.jobs.push(JobGpu {
+                    pair: i as u32,
+                    tri_first: tri_first + start,
+                    tri_count: n,
+                    slot: flat.jobs.len() as u32 - job_first,
+                });
+                start += n;
+            }
+            flat.pairs.push(PairGpu {
+                a_pos: pose4(p.a_pose.0),
+                a_rot: quat4(p.a_pose.1),
+                b_pos: pose4(p.b_pose.0),
+                b_rot: quat4(p.b_pose.1),
+                sdf_origin,
+                sdf_dims,
+                body_a: p.body_a,
+                body_b: p.body_b,
+                tri_first,
+                tri_count,
+                sdf_kind,
+                job_first,
+                job_count: flat.jobs.len() as u32 - job_first,
+                _pad: 0,
+                contact_offset: p.contact_offset,
+                radius: p.query.radius,
+                area_unit,
+                // Contacts of one patch closer than a tenth of a typical edge add nothing.
+                min_separation: 0.1 * mean_edge,
+            });
+        }
+        if flat.tri_verts.is_empty() {
+            flat.tri_verts.push([0.0; 4]);
+        }
+        if flat.sdf_values.is_empty() {
+            flat.sdf_values.push(0.0);
+        }
+        Ok(flat)
+    }
+
+    /// Query triangles of the largest pair: used to pick the job size.
+    pub fn max_triangles(&self) -> u32 {
+        self.pairs.iter().map(|p| p.query.triangles.len() as u32).max().unwrap_or(0)
+    }
+}
+
+/// Triangles per job: enough workgroups to fill the device (~64) without splitting pairs needlessly.
+pub fn auto_chunk(max_triangles: u32, world_count: u32) -> u32 {
+    let per_pair_jobs = (64 / world_count.max(1)).max(1);
+    let chunk = max_triangles.div_ceil(per_pair_jobs).next_multiple_of(256);
+    chunk.clamp(256, 1 << 20)
+}

@@ -1,0 +1,263 @@
+//! The contact pipeline on the GPU: model buffers uploaded once, two dispatches per frame (generate, then
+//! merge), results left on the device for the solver. [`ContactPipeline::contacts_cpu`] runs the CPU twin.
+
+use super::generate::{generate_job_cpu, params, GenerateKernel, Xf};
+use super::merge::{merge_cpu, MergeKernel};
+use super::model::{auto_chunk, ContactModel, FlatModel, PatchGpu};
+use super::{Contact, ContactConfig, Patch};
+use crate::error::{EngineError, Result};
+use crate::gpu::GpuContext;
+use glam::{Quat, Vec3, Vec4};
+
+/// Body pose as the kernels read it: position xyz (w unused) and quaternion xyzw. 32 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable, PartialEq)]
+pub struct TransformGpu {
+    pub p: [f32; 4],
+    pub q: [f32; 4],
+}
+
+impl TransformGpu {
+    pub fn new(p: Vec3, q: Quat) -> Self {
+        TransformGpu { p: [p.x, p.y, p.z, 0.0], q: [q.x, q.y, q.z, q.w] }
+    }
+    pub fn xf(&self) -> Xf {
+        Xf { p: Vec3::new(self.p[0], self.p[1], self.p[2]), q: Vec4::from_array(self.q) }
+    }
+}
+
+/// Reduced contacts of every pair in every world, read back to the host.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ContactsHost {
+    /// Patches of pair p in world w at `patches[w * pair_count + p]`.
+    pub patches: Vec<Vec<Patch>>,
+    /// Candidates generated (before reduction) per `[w * pair_count + p]`.
+    pub candidates: Vec<u32>,
+}
+
+impl ContactsHost {
+    /// Contacts of one pair in one world.
+    pub fn contact_count(&self, i: usize) -> usize {
+        self.patches[i].iter().map(|p| p.contacts.len()).sum()
+    }
+}
+
+/// Converts kernel output into host patches.
+pub fn to_patches(raw: &[PatchGpu]) -> Vec<Patch> {
+    raw.iter()
+        .map(|p| Patch {
+            normal: Vec3::new(p.normal[0], p.normal[1], p.normal[2]),
+            area: p.normal[3],
+            contacts: p
+                .slots
+                .iter()
+                .filter(|s| s[3] < 1e38)
+                .map(|s| Contact { point: Vec3::new(s[0], s[1], s[2]), depth: s[3] })
+                .collect(),
+        })
+        .collect()
+}
+
+/// GPU buffers and pipelines for one contact model at one world count.
+pub struct ContactPipeline {
+    pub cfg: ContactConfig,
+    pub flat: FlatModel,
+    pub body_count: u32,
+    pub world_count: u32,
+    generate: GenerateKernel,
+    merge: MergeKernel,
+    /// Body poses, shape [world_count * body_count]; written by the host or the solver.
+    pub body_q: wgpu::Buffer,
+    /// Per-job patches, shape [world_count * job_count * max_patches].
+    pub job_patches: wgpu::Buffer,
+    pub job_patch_count: wgpu::Buffer,
+    /// Candidates per pair and world before reduction, shape [world_count * pair_count].
+    pub pair_candidates: wgpu::Buffer,
+    /// Reduced patches, shape [world_count * pair_count * max_patches].
+    pub patches: wgpu::Buffer,
+    /// Patches in use per pair and world, shape [world_count * pair_count].
+    pub patch_counts: wgpu::Buffer,
+    gen_groups: [wgpu::BindGroup; 3],
+    merge_groups: [wgpu::BindGroup; 3],
+}
+
+impl ContactPipeline {
+    /// Validates the configuration against the model and the device, uploads the model, builds pipelines.
+    pub fn new(gpu: &GpuContext, model: &ContactModel, world_count: u32, cfg: &ContactConfig) -> Result<Self> {
+        cfg.validate()?;
+        let limits = gpu.limits();
+        let need = cfg.workgroup_bytes();
+        if need > limits.max_compute_workgroup_storage_size {
+            return Err(EngineError::Gpu(format!(
+                "max_patches = {} needs {need} bytes of workgroup memory; adapter {:?} offers max_compute_workgroup_storage_size = {}; lower max_patches",
+                cfg.max_patches, gpu.info.name, limits.max_compute_workgroup_storage_size
+            )));
+        }
+        if world_count == 0 || world_count > limits.max_compute_workgroups_per_dimension {
+            return Err(EngineError::Config {
+                field: "world_count",
+                value: world_count.to_string(),
+                expected: format!("1..={}", limits.max_compute_workgroups_per_dimension),
+            });
+        }
+        let chunk =
+            if cfg.chunk_triangles == 0 { auto_chunk(model.max_triangles(), world_count) } else { cfg.chunk_triangles };
+        let flat = model.flatten(chunk)?;
+        let job_count = flat.jobs.len() as u32;
+        let pair_count = flat.pairs.len() as u32;
+        let p = params(&flat, model.body_count, world_count, cfg);
+        let patch_bytes = std::mem::size_of::<PatchGpu>() as u64;
+        let job_patch_bytes = world_count as u64 * job_count as u64 * cfg.max_patches as u64 * patch_bytes;
+        if job_patch_bytes > limits.max_storage_buffer_binding_size {
+            return Err(EngineError::TooLarge {
+                what: format!(
+                    "per-job patch buffer for {world_count} worlds x {job_count} jobs x {} patches",
+                    cfg.max_patches
+                ),
+                needed_bytes: job_patch_bytes,
+                limit_bytes: limits.max_storage_buffer_binding_size,
+                hint: "use fewer worlds per pipeline, a larger chunk_triangles, or a smaller max_patches".into(),
+            });
+        }
+        let dev = &gpu.device;
+        let none = wgpu::BufferUsages::empty();
+        let uniform = {
+            use wgpu::util::DeviceExt;
+            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("contact-params"),
+                contents: bytemuck::bytes_of(&p),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        };
+        let pairs = gpu.storage_buffer("pairs", &flat.pairs, none);
+        let jobs = gpu.storage_buffer("jobs", &flat.jobs, none);
+        let tri_verts = gpu.storage_buffer("tri_verts", &flat.tri_verts, none);
+        let sdf_values = gpu.storage_buffer("sdf_values", &flat.sdf_values, none);
+        let identity =
+            vec![TransformGpu::new(Vec3::ZERO, Quat::IDENTITY); (world_count * model.body_count.max(1)) as usize];
+        let body_q = gpu.storage_buffer("body_q", &identity, none);
+        let job_patches = gpu.storage_buffer_zeroed("job_patches", job_patch_bytes);
+        let job_patch_count = gpu.storage_buffer_zeroed("job_patch_count", 4 * (world_count * job_count) as u64);
+        let pair_candidates = gpu.storage_buffer_zeroed("pair_candidates", 4 * (world_count * pair_count) as u64);
+        let patches = gpu.storage_buffer_zeroed(
+            "patches",
+            world_count as u64 * pair_count as u64 * cfg.max_patches as u64 * patch_bytes,
+        );
+        let patch_counts = gpu.storage_buffer_zeroed("patch_counts", 4 * (world_count * pair_count) as u64);
+        let generate = GenerateKernel::new(dev, cfg);
+        let merge = MergeKernel::new(dev, cfg);
+        let group = |pipeline: &wgpu::ComputePipeline, index: u32, buffers: &[&wgpu::Buffer]| {
+            dev.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &pipeline.get_bind_group_layout(index),
+                entries: &buffers
+                    .iter()
+                    .enumerate()
+                    .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                    .collect::<Vec<_>>(),
+            })
+        };
+        let gp = &generate.pipeline;
+        let gen_groups = [
+            group(gp, 0, &[&uniform, &pairs, &jobs, &tri_verts, &sdf_values]),
+            group(gp, 1, &[&body_q]),
+            group(gp, 2, &[&job_patches, &job_patch_count, &pair_candidates]),
+        ];
+        let mp = &merge.pipeline;
+        let merge_groups = [
+            group(mp, 0, &[&uniform, &pairs]),
+            group(mp, 1, &[&job_patches, &job_patch_count]),
+            group(mp, 2, &[&patches, &patch_counts]),
+        ];
+        Ok(ContactPipeline {
+            cfg: cfg.clone(),
+            flat,
+            body_count: model.body_count,
+            world_count,
+            generate,
+            merge,
+            body_q,
+            job_patches,
+            job_patch_count,
+            pair_candidates,
+            patches,
+            patch_counts,
+            gen_groups,
+            merge_groups,
+        })
+    }
+
+    /// Uploads body poses (shape [world_count * body_count]).
+    pub fn write_body_q(&self, gpu: &GpuContext, body_q: &[TransformGpu]) {
+        assert_eq!(body_q.len(), (self.world_count * self.body_count) as usize, "body_q shape");
+        if !body_q.is_empty() {
+            gpu.queue.write_buffer(&self.body_q, 0, bytemuck::cast_slice(body_q));
+        }
+    }
+
+    /// Records one frame of contact handling (clear counters, generate, merge) into `encoder`.
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.clear_buffer(&self.pair_candidates, 0, None);
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("contacts"), timestamp_writes: None });
+        self.generate.dispatch(&mut pass, refs(&self.gen_groups), self.flat.jobs.len() as u32, self.world_count);
+        self.merge.dispatch(&mut pass, refs(&self.merge_groups), self.flat.pairs.len() as u32, self.world_count);
+    }
+
+    /// Encodes and submits one frame.
+    pub fn run(&self, gpu: &GpuContext) {
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        self.encode(&mut enc);
+        gpu.queue.submit([enc.finish()]);
+    }
+
+    /// Reads the reduced contacts back (waits for the GPU).
+    pub fn read(&self, gpu: &GpuContext) -> ContactsHost {
+        let raw: Vec<PatchGpu> = gpu.read_buffer(&self.patches);
+        let counts: Vec<u32> = gpu.read_buffer(&self.patch_counts);
+        let candidates: Vec<u32> = gpu.read_buffer(&self.pair_candidates);
+        let m = self.cfg.max_patches as usize;
+        let n = (self.world_count as usize) * self.flat.pairs.len();
+        ContactsHost {
+            patches: (0..n).map(|i| to_patches(&raw[i * m..i * m + counts[i] as usize])).collect(),
+            candidates: candidates[..n].to_vec(),
+        }
+    }
+
+    /// The CPU twin of [`encode`](Self::encode) + [`read`](Self::read) for the given poses.
+    pub fn contacts_cpu(&self, body_q: &[TransformGpu]) -> ContactsHost {
+        contacts_cpu(&self.flat, self.body_count, self.world_count, body_q, &self.cfg)
+    }
+}
+
+/// Plain-Rust contact generation and reduction for every pair and world (parallel over worlds' jobs).
+pub fn contacts_cpu(
+    flat: &FlatModel,
+    body_count: u32,
+    world_count: u32,
+    body_q: &[TransformGpu],
+    cfg: &ContactConfig,
+) -> ContactsHost {
+    use rayon::prelude::*;
+    let xf: Vec<Xf> = body_q.iter().map(|t| t.xf()).collect();
+    let pair_count = flat.pairs.len();
+    let results: Vec<(Vec<Patch>, u32)> = (0..world_count as usize * pair_count)
+        .into_par_iter()
+        .map(|i| {
+            let (world, pair) = ((i / pair_count) as u32, i % pair_count);
+            let p = &flat.pairs[pair];
+            let outs: Vec<_> = flat.jobs[p.job_first as usize..(p.job_first + p.job_count) as usize]
+                .iter()
+                .map(|job| generate_job_cpu(flat, job, &xf, body_count, world, cfg))
+                .collect();
+            let slices: Vec<&[PatchGpu]> = outs.iter().map(|o| o.patches.as_slice()).collect();
+            (to_patches(&merge_cpu(p, &slices, cfg)), outs.iter().map(|o| o.candidates).sum())
+        })
+        .collect();
+    let (patches, candidates) = results.into_iter().unzip();
+    ContactsHost { patches, candidates }
+}
+
+fn refs(g: &[wgpu::BindGroup; 3]) -> [&wgpu::BindGroup; 3] {
+    [&g[0], &g[1], &g[2]]
+}

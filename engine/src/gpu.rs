@@ -1,0 +1,255 @@
+//! One wgpu instance, adapter, device and queue per process ([`GpuContext::global`]).
+//!
+//! Adapter choice: `FACTORY_ADAPTER=gpu` takes a hardware adapter, `cpu` a software one (Mesa's lavapipe),
+//! any other value the first adapter whose name contains it (case-insensitive). Unset, a hardware adapter
+//! is preferred and lavapipe is the fallback. The device is created with the adapter's full limits and
+//! the features burn's cubecl-wgpu may use, so the trainer can later share it (DESIGN section 1); the
+//! engine's own needs ([`REQUIRED_LIMITS`]) are checked first and a shortfall names the limit.
+
+use crate::error::{EngineError, Result};
+use bytemuck::Pod;
+use std::sync::OnceLock;
+
+/// Environment variable that selects the adapter: `gpu`, `cpu`, or a substring of the adapter name.
+pub const ADAPTER_ENV: &str = "FACTORY_ADAPTER";
+
+/// Hint printed when no adapter exists at all.
+pub const INSTALL_HINT: &str = "install a Vulkan driver: on Debian/Ubuntu `apt-get install mesa-vulkan-drivers` \
+     (Mesa's software rasteriser lavapipe runs the engine on any CPU); on Fedora `dnf install mesa-vulkan-drivers`";
+
+/// The limits the engine's kernels need: (name, minimum, getter). Checked against the adapter before the
+/// device is requested, so a short adapter fails with the limit's name instead of a validation panic.
+pub const REQUIRED_LIMITS: &[(&str, u64, fn(&wgpu::Limits) -> u64)] = &[
+    ("max_storage_buffers_per_shader_stage", 8, |l| l.max_storage_buffers_per_shader_stage as u64),
+    ("max_compute_invocations_per_workgroup", 256, |l| l.max_compute_invocations_per_workgroup as u64),
+    ("max_compute_workgroup_size_x", 256, |l| l.max_compute_workgroup_size_x as u64),
+    ("max_compute_workgroup_storage_size", 16384, |l| l.max_compute_workgroup_storage_size as u64),
+    ("max_storage_buffer_binding_size", 128 << 20, |l| l.max_storage_buffer_binding_size),
+    ("max_bind_groups", 3, |l| l.max_bind_groups as u64),
+];
+
+/// How the adapter is chosen.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum AdapterChoice {
+    /// A hardware adapter if there is one, else a software one.
+    Auto,
+    /// Hardware only (discrete, integrated or virtual GPU).
+    Gpu,
+    /// Software only (lavapipe / llvmpipe / WARP).
+    Cpu,
+    /// The first adapter whose name contains this text (case-insensitive).
+    Name(String),
+}
+
+impl AdapterChoice {
+    /// Reads [`ADAPTER_ENV`]; unset or empty means [`AdapterChoice::Auto`].
+    pub fn from_env() -> Self {
+        match std::env::var(ADAPTER_ENV).ok().as_deref().map(str::trim) {
+            None | Some("") | Some("auto") => AdapterChoice::Auto,
+            Some(s) if s.eq_ignore_ascii_case("gpu") => AdapterChoice::Gpu,
+            Some(s) if s.eq_ignore_ascii_case("cpu") => AdapterChoice::Cpu,
+            Some(s) => AdapterChoice::Name(s.to_string()),
+        }
+    }
+}
+
+/// The process-wide GPU handles.
+pub struct GpuContext {
+    pub instance: wgpu::Instance,
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    /// Name, backend and type of the chosen adapter.
+    pub info: wgpu::AdapterInfo,
+}
+
+static GLOBAL: OnceLock<std::result::Result<GpuContext, String>> = OnceLock::new();
+
+fn is_hardware(t: wgpu::DeviceType) -> bool {
+    matches!(t, wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu | wgpu::DeviceType::VirtualGpu)
+}
+
+/// Picks an adapter from `(name, type)` descriptions; pure so the rules are unit-tested without a GPU.
+pub fn pick_adapter(adapters: &[(String, wgpu::DeviceType)], choice: &AdapterChoice) -> Option<usize> {
+    let find = |f: &dyn Fn(&(String, wgpu::DeviceType)) -> bool| adapters.iter().position(f);
+    // Rank discrete over integrated over virtual GPUs.
+    let best_hw = || {
+        [wgpu::DeviceType::DiscreteGpu, wgpu::DeviceType::IntegratedGpu, wgpu::DeviceType::VirtualGpu]
+            .iter()
+            .find_map(|t| find(&|a| a.1 == *t))
+    };
+    match choice {
+        AdapterChoice::Gpu => best_hw(),
+        AdapterChoice::Cpu => find(&|a| a.1 == wgpu::DeviceType::Cpu),
+        AdapterChoice::Name(n) => {
+            let n = n.to_lowercase();
+            find(&|a| a.0.to_lowercase().contains(&n))
+        }
+        AdapterChoice::Auto => best_hw().or_else(|| find(&|a| a.1 == wgpu::DeviceType::Cpu)).or_else(|| {
+            if adapters.is_empty() {
+                None
+            } else {
+                Some(0)
+            }
+        }),
+    }
+}
+
+impl GpuContext {
+    /// The process-wide context, created on first use with [`AdapterChoice::from_env`].
+    pub fn global() -> Result<&'static GpuContext> {
+        GLOBAL
+            .get_or_init(|| GpuContext::new(&AdapterChoice::from_env()).map_err(|e| e.to_string()))
+            .as_ref()
+            .map_err(|e| EngineError::Gpu(e.clone()))
+    }
+
+    /// Creates a new context. Prefer [`GpuContext::global`]: wgpu devices are heavy, and the trainer
+    /// shares one with burn.
+    pub fn new(choice: &AdapterChoice) -> Result<Self> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::VULKAN | wgpu::Backends::METAL | wgpu::Backends::DX12,
+            ..wgpu::InstanceDescriptor::new_without_display_handle_from_env()
+        });
+        let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+        let described: Vec<(String, wgpu::DeviceType)> =
+            adapters.iter().map(|a| (a.get_info().name, a.get_info().device_type)).collect();
+        if adapters.is_empty() {
+            return Err(EngineError::Gpu(format!("no GPU or software adapter found; {INSTALL_HINT}")));
+        }
+        let Some(idx) = pick_adapter(&described, choice) else {
+            let list: Vec<String> = described.iter().map(|(n, t)| format!("{n} ({t:?})")).collect();
+            return Err(EngineError::Gpu(format!(
+                "{ADAPTER_ENV}={choice:?} matches no adapter; available: {}; valid values: gpu, cpu, or a name substring",
+                list.join(", ")
+            )));
+        };
+        let adapter = adapters.into_iter().nth(idx).expect("index from pick_adapter");
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        check_limits(&info.name, &limits)?;
+        // Full adapter limits and the features cubecl may use, so burn can share this device.
+        let wanted = wgpu::Features::SHADER_F16 | wgpu::Features::SHADER_INT64 | wgpu::Features::SUBGROUP;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("factory-engine"),
+            required_features: adapter.features() & wanted,
+            required_limits: limits,
+            ..Default::default()
+        }))
+        .map_err(|e| EngineError::Gpu(format!("adapter {:?} refused a device: {e}", info.name)))?;
+        log::info!("factory-engine on {} ({:?}, {:?})", info.name, info.device_type, info.backend);
+        Ok(GpuContext { instance, adapter, device, queue, info })
+    }
+
+    /// True when running on a software rasteriser (lavapipe): used by benchmarks to label results.
+    pub fn is_software(&self) -> bool {
+        !is_hardware(self.info.device_type)
+    }
+
+    /// Limits of the device (the adapter's full limits).
+    pub fn limits(&self) -> wgpu::Limits {
+        self.device.limits()
+    }
+
+    /// A storage buffer initialised with `data` (at least 4 bytes, so empty arrays still bind).
+    pub fn storage_buffer<T: Pod>(&self, label: &str, data: &[T], extra_usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        use wgpu::util::DeviceExt;
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        let padded;
+        let contents = if bytes.len() < 4 {
+            padded = vec![0u8; 4];
+            &padded[..]
+        } else {
+            bytes
+        };
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_DST
+                | wgpu::BufferUsages::COPY_SRC
+                | extra_usage,
+        })
+    }
+
+    /// An uninitialised (zeroed) storage buffer of `bytes` bytes.
+    pub fn storage_buffer_zeroed(&self, label: &str, bytes: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes.max(4).next_multiple_of(4),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Copies `buffer` back to the host and waits. For tests, benchmarks and logging; never in a step loop.
+    pub fn read_buffer<T: Pod>(&self, buffer: &wgpu::Buffer) -> Vec<T> {
+        let size = buffer.size();
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+        self.queue.submit([enc.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        staging.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely()).expect("device lost while reading back a buffer");
+        rx.recv().expect("map callback").expect("buffer map failed");
+        let view = staging.get_mapped_range(..).expect("mapped range");
+        let n = view.len() / std::mem::size_of::<T>();
+        let out = bytemuck::cast_slice::<u8, T>(&view[..n * std::mem::size_of::<T>()]).to_vec();
+        drop(view);
+        staging.unmap();
+        out
+    }
+
+    /// Blocks until all submitted work is done.
+    pub fn wait(&self) {
+        self.device.poll(wgpu::PollType::wait_indefinitely()).expect("device lost");
+    }
+}
+
+/// Checks [`REQUIRED_LIMITS`] against `limits`, naming the first shortfall.
+pub fn check_limits(adapter: &str, limits: &wgpu::Limits) -> Result<()> {
+    for (name, min, get) in REQUIRED_LIMITS {
+        let have = get(limits);
+        if have < *min {
+            return Err(EngineError::Gpu(format!(
+                "adapter {adapter:?} is short of a needed limit: {name} = {have}, the engine needs at least {min}"
+            )));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use wgpu::DeviceType as T;
+
+    #[test]
+    fn adapter_rules() {
+        let a = vec![("llvmpipe (LLVM 15)".to_string(), T::Cpu), ("NVIDIA H100".to_string(), T::DiscreteGpu)];
+        assert_eq!(pick_adapter(&a, &AdapterChoice::Auto), Some(1));
+        assert_eq!(pick_adapter(&a, &AdapterChoice::Cpu), Some(0));
+        assert_eq!(pick_adapter(&a, &AdapterChoice::Gpu), Some(1));
+        assert_eq!(pick_adapter(&a, &AdapterChoice::Name("LLVM".into())), Some(0));
+        assert_eq!(pick_adapter(&a, &AdapterChoice::Name("radeon".into())), None);
+        let cpu_only = vec![("llvmpipe".to_string(), T::Cpu)];
+        assert_eq!(pick_adapter(&cpu_only, &AdapterChoice::Auto), Some(0));
+        assert_eq!(pick_adapter(&cpu_only, &AdapterChoice::Gpu), None);
+    }
+
+    #[test]
+    fn short_limit_is_named() {
+        let mut l = wgpu::Limits::default();
+        l.max_storage_buffers_per_shader_stage = 4;
+        let e = check_limits("toy", &l).unwrap_err().to_string();
+        assert!(e.contains("max_storage_buffers_per_shader_stage = 4") && e.contains("at least 8"), "{e}");
+    }
+}
