@@ -41,7 +41,7 @@ impl ThreadOptions {
     /// Checks the ranges documented on the fields.
     pub fn validate(&self) -> Result<()> {
         let n = self.segments_per_turn;
-        if n < 24 || n % 12 != 0 || n > 4096 {
+        if n < 24 || !n.is_multiple_of(12) || n > 4096 {
             return Err(AssetError::InvalidOption {
                 name: "segments per turn",
                 value: n.to_string(),

@@ -395,7 +395,13 @@ impl ThreadProfile {
         let p = self.pitch;
         let (a, b) = (self.crest_half_width(), self.root_start());
         let tol = 1e-9 * p;
-        if !(self.min_radius < self.max_radius) || a < -tol || b > 0.5 * p + tol || a >= b {
+        if self.min_radius.is_nan()
+            || self.min_radius >= self.max_radius
+            || a.is_nan()
+            || a < -tol
+            || b > 0.5 * p + tol
+            || a >= b
+        {
             return Err(AssetError::Profile(format!(
                 "pitch {p} m, pitch radius {}, root {}, crest {}: crest half width {a}, root start {b} \
                  (need 0 <= crest half width < root start <= P/2)",

@@ -130,7 +130,7 @@ pub struct PegHole {
 /// Builds the peg and hole of `size` at `fit`.
 pub fn peg_hole(size: PegSize, fit: Fit, opts: &PegHoleOptions) -> Result<PegHole> {
     let n = opts.segments;
-    if n < 16 || n % 8 != 0 || n > 4096 {
+    if n < 16 || !n.is_multiple_of(8) || n > 4096 {
         return Err(AssetError::InvalidOption {
             name: "segments",
             value: n.to_string(),
@@ -146,7 +146,7 @@ pub fn peg_hole(size: PegSize, fit: Fit, opts: &PegHoleOptions) -> Result<PegHol
             expected: format!("0 <= chamfer < {} m (half the peg radius)", 0.5 * rp),
         });
     }
-    if !(opts.block_width > dh + 1e-3) {
+    if opts.block_width.is_nan() || opts.block_width <= dh + 1e-3 {
         return Err(AssetError::InvalidOption {
             name: "block width",
             value: format!("{} m", opts.block_width),
