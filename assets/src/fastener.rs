@@ -76,11 +76,42 @@ pub struct NutBolt {
     pub thread_phase: f32,
 }
 
-/// Builds the nut and bolt of `size` at end `fit` of class 6H/6g, in the assembled zero pose.
+/// Builds the nut and bolt of `size` at end `fit` of class 6H/6g with Factory's dimensions, in the
+/// assembled zero pose.
 pub fn nut_bolt(size: IsoSize, fit: Fit, opts: &ThreadOptions) -> Result<NutBolt> {
+    nut_bolt_from_spec(ThreadSpec::new(size, fit), size.factory_dims(), opts)
+}
+
+/// Builds a nut and bolt from explicit thread diameters and dimensions (any point of the tolerance band,
+/// or a hand-made spec: start from [`ThreadSpec::new`] and edit its public diameters). Part names still
+/// come from `spec.size` and `spec.fit`. A spec whose nut pitch diameter is not larger than the bolt's
+/// gives touching or interpenetrating threads; that is allowed (the paper's contact tests use a 1 um
+/// negative clearance) and the caller's responsibility.
+pub fn nut_bolt_from_spec(spec: ThreadSpec, dims: FastenerDims, opts: &ThreadOptions) -> Result<NutBolt> {
     opts.validate()?;
-    let spec = ThreadSpec::new(size, fit);
-    let dims = size.factory_dims();
+    let positive = [dims.nut_height, dims.width_across_flats, dims.head_height, dims.shank_length];
+    if positive.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+        return Err(AssetError::InvalidOption {
+            name: "fastener dimensions",
+            value: format!("{dims:?}"),
+            expected: "finite positive lengths [m]".into(),
+        });
+    }
+    if dims.nut_height > dims.shank_length {
+        return Err(AssetError::InvalidOption {
+            name: "nut height",
+            value: format!("{} m", dims.nut_height),
+            expected: format!("at most the shank length {} m (the nut sits on the shank)", dims.shank_length),
+        });
+    }
+    let widest = spec.nut_root_diameter.max(spec.bolt_major_diameter);
+    if dims.width_across_flats <= widest {
+        return Err(AssetError::InvalidOption {
+            name: "width across flats",
+            value: format!("{} m", dims.width_across_flats),
+            expected: format!("more than the thread's largest diameter {widest} m"),
+        });
+    }
     let n = opts.segments_per_turn;
     let apothem = 0.5 * dims.width_across_flats;
     let (head, top) = (dims.head_height, dims.head_height + dims.shank_length);
@@ -108,7 +139,7 @@ pub fn nut_bolt(size: IsoSize, fit: Fit, opts: &ThreadOptions) -> Result<NutBolt
     b.annulus(&bore_top, &hex_top, true);
     let nut_mesh = b.finish();
 
-    let tag = format!("{}_{}", size.name().to_lowercase(), fit.name());
+    let tag = format!("{}_{}", spec.size.name().to_lowercase(), spec.fit.name());
     Ok(NutBolt {
         nut: Part::new(format!("nut_{tag}"), nut_mesh, STEEL_DENSITY, NUT_SDF_RESOLUTION),
         bolt: Part::new(format!("bolt_{tag}"), bolt_mesh, STEEL_DENSITY, BOLT_SDF_RESOLUTION),
@@ -146,6 +177,31 @@ mod tests {
         }
         let e = ThreadOptions { flank_subdivisions: 0, ..base }.validate().unwrap_err().to_string();
         assert!(e.contains("1..=16"), "{e}");
+        let spec = ThreadSpec::new(IsoSize::M8, Fit::Tight);
+        let dims = IsoSize::M8.factory_dims();
+        let narrow = FastenerDims { width_across_flats: 0.007, ..dims };
+        assert!(nut_bolt_from_spec(spec, narrow, &base).unwrap_err().to_string().contains("width across flats"));
+        let tall = FastenerDims { nut_height: 0.05, ..dims };
+        assert!(nut_bolt_from_spec(spec, tall, &base).unwrap_err().to_string().contains("nut height"));
+        let zero = FastenerDims { head_height: 0.0, ..dims };
+        assert!(nut_bolt_from_spec(spec, zero, &base).is_err());
+    }
+
+    #[test]
+    fn from_spec_with_a_mid_band_bolt_is_closed_and_in_between() {
+        let tight = ThreadSpec::new(IsoSize::M12, Fit::Tight);
+        let loose = ThreadSpec::new(IsoSize::M12, Fit::Loose);
+        let mut mid = tight;
+        mid.bolt_pitch_diameter = 0.5 * (tight.bolt_pitch_diameter + loose.bolt_pitch_diameter);
+        mid.bolt_root_diameter = 0.5 * (tight.bolt_root_diameter + loose.bolt_root_diameter);
+        let opts = ThreadOptions { segments_per_turn: 48, ..Default::default() };
+        let nb = nut_bolt_from_spec(mid, IsoSize::M12.factory_dims(), &opts).unwrap();
+        assert!(nb.bolt.mesh.topology().is_watertight());
+        let m = |s: ThreadSpec| {
+            nut_bolt_from_spec(s, IsoSize::M12.factory_dims(), &opts).unwrap().bolt.mass_properties.mass
+        };
+        let (mt, mm, ml) = (m(tight), nb.bolt.mass_properties.mass, m(loose));
+        assert!(mt > mm && mm > ml, "{mt} {mm} {ml}");
     }
 
     #[test]

@@ -9,6 +9,16 @@
 //!
 //! Units: metres, kilograms, seconds, radians throughout (fields say otherwise where they are in mm/um).
 //! Every assembly's zero pose is the assembled configuration.
+//!
+//! ```
+//! use factory_assets::{nut_bolt, Fit, IsoSize, ThreadOptions};
+//! let nb = nut_bolt(IsoSize::M16, Fit::Tight, &ThreadOptions { segments_per_turn: 48, ..Default::default() })?;
+//! assert!(nb.nut.mesh.topology().is_watertight());
+//! assert_eq!(nb.pitch, 0.002);
+//! // Radial gap between the flanks: -es/2 = 19 um at the tight end of 6H/6g.
+//! assert!((nb.spec.radial_flank_clearance() - 19e-6).abs() < 1e-9);
+//! # Ok::<(), factory_assets::AssetError>(())
+//! ```
 
 pub mod error;
 pub mod fastener;
@@ -19,8 +29,8 @@ pub mod peg_hole;
 
 pub use error::{AssetError, Result};
 pub use fastener::{
-    bolt_closed_form_volume, nut_bolt, nut_closed_form_volume, NutBolt, ThreadOptions, BOLT_SDF_RESOLUTION,
-    NUT_SDF_RESOLUTION,
+    bolt_closed_form_volume, nut_bolt, nut_bolt_from_spec, nut_closed_form_volume, NutBolt, ThreadOptions,
+    BOLT_SDF_RESOLUTION, NUT_SDF_RESOLUTION,
 };
 pub use iso::{FastenerDims, Fit, Iso965Row, IsoSize, ThreadProfile, ThreadSpec, STEEL_DENSITY};
 pub use part::{Part, WrittenPart};
