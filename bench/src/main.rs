@@ -1,1 +1,203 @@
-fn main() {}
+//! `factory-bench`: measurements behind docs/BENCHMARKS.md (paper Tables I and II).
+//!
+//! `factory-bench contacts --pair nut-bolt --size M16 --fit tight --worlds 64 --json` times contact
+//! handling (generation + reduction, one 1/60 s frame) for N parallel copies of a pair and reports the
+//! candidates, contacts and patches per pair.
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand, ValueEnum};
+use factory_assets::{nut_bolt, peg_hole, Fit, IsoSize, PegHoleOptions, PegSize, ThreadOptions};
+use factory_bench::contact_scene::{min_depth, ContactScene, PartPair};
+use factory_engine::contact::{contacts_cpu, ContactConfig, ContactPipeline};
+use factory_engine::gpu::GpuContext;
+use factory_engine::mesh::TriMesh;
+use factory_engine::sdf::cache::SdfCache;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(name = "factory-bench", about = "Benchmarks of the factory-rs contact pipeline")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum PairKind {
+    /// Our generated ISO hex nut on its bolt.
+    NutBolt,
+    /// Our generated round peg in its hole.
+    PegHole,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Contact generation + reduction for N parallel copies of a shape pair (paper Table I).
+    Contacts {
+        /// Which generated pair (ignored with --mesh-a/--mesh-b).
+        #[arg(long, value_enum, default_value = "nut-bolt")]
+        pair: PairKind,
+        /// Nut-bolt size (M4, M8, M12, M16, M20) or peg diameter in mm (4, 8, 12, 16).
+        #[arg(long, default_value = "M16")]
+        size: String,
+        /// Tolerance end: tight or loose.
+        #[arg(long, default_value = "tight")]
+        fit: String,
+        /// Parallel worlds, one pair each.
+        #[arg(long, default_value_t = 1)]
+        worlds: u32,
+        /// Moving part (e.g. Factory's nut) as OBJ, in the assembled pose; needs --mesh-b.
+        #[arg(long, requires = "mesh_b")]
+        mesh_a: Option<PathBuf>,
+        /// Fixed part (e.g. Factory's bolt) as OBJ, in the assembled pose; needs --mesh-a.
+        #[arg(long, requires = "mesh_a")]
+        mesh_b: Option<PathBuf>,
+        /// Thread pitch of the mesh pair [mm] (0 for unthreaded pairs).
+        #[arg(long, default_value_t = 2.0)]
+        pitch_mm: f32,
+        /// SDF resolution: samples along the SDF part's longest axis.
+        #[arg(long, default_value_t = 256)]
+        sdf_res: u32,
+        /// Patch budget per pair (16..=256).
+        #[arg(long, default_value_t = 64)]
+        patches: u32,
+        /// Contact offset [mm]: candidates farther than this are dropped.
+        #[arg(long, default_value_t = 1.0)]
+        offset_mm: f32,
+        /// Frames to time (after one warm-up frame).
+        #[arg(long, default_value_t = 30)]
+        frames: u32,
+        /// Also time the plain-Rust twin (all cores) on the same input.
+        #[arg(long)]
+        cpu: bool,
+        /// Print one JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn main() -> Result<()> {
+    match Cli::parse().cmd {
+        Cmd::Contacts {
+            pair,
+            size,
+            fit,
+            worlds,
+            mesh_a,
+            mesh_b,
+            pitch_mm,
+            sdf_res,
+            patches,
+            offset_mm,
+            frames,
+            cpu,
+            json,
+        } => {
+            let fit_v: Fit = fit.parse().map_err(|e| anyhow::anyhow!("--fit: {e}"))?;
+            let parts = match (mesh_a, mesh_b) {
+                (Some(a), Some(b)) => PartPair {
+                    name: format!("{} / {}", a.display(), b.display()),
+                    a: TriMesh::load_obj(&a)?,
+                    b: TriMesh::load_obj(&b)?,
+                    pitch: pitch_mm * 1e-3,
+                    side_shift: 0.0,
+                },
+                _ => match pair {
+                    PairKind::NutBolt => {
+                        let s: IsoSize = size.parse().map_err(|e| anyhow::anyhow!("--size: {e}"))?;
+                        let nb = nut_bolt(s, fit_v, &ThreadOptions::default())?;
+                        PartPair {
+                            name: format!("nut-bolt {} {}", s.name(), fit_v.name()),
+                            a: nb.nut.mesh,
+                            b: nb.bolt.mesh,
+                            pitch: nb.pitch,
+                            side_shift: 0.0,
+                        }
+                    }
+                    PairKind::PegHole => {
+                        let s: PegSize = size.parse().map_err(|e| anyhow::anyhow!("--size: {e}"))?;
+                        let ph = peg_hole(s, fit_v, &PegHoleOptions::default())?;
+                        PartPair {
+                            name: format!("peg-hole {}mm {}", s.nominal_mm(), fit_v.name()),
+                            a: ph.peg.mesh,
+                            b: ph.hole.mesh,
+                            pitch: 0.0,
+                            side_shift: 0.5 * ph.clearance,
+                        }
+                    }
+                },
+            };
+            let cache = SdfCache::new(SdfCache::default_dir());
+            let t_bake = Instant::now();
+            let scene =
+                ContactScene::new(parts, sdf_res, offset_mm * 1e-3, &cache).context("building the contact scene")?;
+            let bake_s = t_bake.elapsed().as_secs_f64();
+            let gpu = GpuContext::global()?;
+            // Threaded pairs: the nut raised by 5 whole pitches (threads in phase, centred in their axial
+            // play, as the peers' scene); other pairs: the assembled pose, the peg against one side.
+            let lift = 5.0 * scene.pair.pitch;
+            // Each world gets its own turn of the nut (threads kept in phase), so worlds differ.
+            let phases: Vec<f32> = (0..worlds).map(|w| (w as f32 * 2.399963) % std::f32::consts::TAU).collect();
+            let poses = scene.poses(lift, &phases);
+            let cfg = ContactConfig { max_patches: patches, ..Default::default() };
+            let pipe = ContactPipeline::new(gpu, &scene.model, worlds, &cfg)?;
+            pipe.write_body_q(gpu, &poses);
+            pipe.run(gpu);
+            let out = pipe.read(gpu);
+            let t = Instant::now();
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            for _ in 0..frames {
+                pipe.encode(&mut enc);
+            }
+            gpu.queue.submit([enc.finish()]);
+            gpu.wait();
+            let handling_ms = t.elapsed().as_secs_f64() * 1e3 / frames as f64;
+            let cpu_ms = if cpu {
+                let t = Instant::now();
+                let reps = 3;
+                for _ in 0..reps {
+                    std::hint::black_box(contacts_cpu(&pipe.flat, 2, worlds, &poses, &cfg));
+                }
+                Some(t.elapsed().as_secs_f64() * 1e3 / reps as f64)
+            } else {
+                None
+            };
+            let n = worlds as f64;
+            let cand = out.candidates.iter().map(|&c| c as f64).sum::<f64>() / n;
+            let contacts = (0..worlds as usize).map(|i| out.contact_count(i) as f64).sum::<f64>() / n;
+            let npatch = out.patches.iter().map(|p| p.len() as f64).sum::<f64>() / n;
+            let max_contacts = (0..worlds as usize).map(|i| out.contact_count(i)).max().unwrap_or(0);
+            if !(cand > 0.0) {
+                bail!("no contact candidates: the parts do not touch at lift {lift} m");
+            }
+            let report = serde_json::json!({
+                "pair": scene.pair.name,
+                "worlds": worlds,
+                "adapter": gpu.info.name,
+                "software_adapter": gpu.is_software(),
+                "query_triangles": scene.query_triangles,
+                "sdf_triangles": scene.sdf_triangles,
+                "sdf_resolution": sdf_res,
+                "sdf_dims": [scene.grid.dims.x, scene.grid.dims.y, scene.grid.dims.z],
+                "sdf_bake_or_load_s": bake_s,
+                "max_patches": patches,
+                "contact_offset_mm": offset_mm,
+                "lift_mm": lift * 1e3,
+                "deepest_contact_um": min_depth(&out).map(|d| d * 1e6),
+                "candidates_per_pair": cand,
+                "contacts_per_pair": contacts,
+                "max_contacts_per_pair": max_contacts,
+                "patches_per_pair": npatch,
+                "handling_ms_per_frame": handling_ms,
+                "cpu_twin_ms_per_frame": cpu_ms,
+                "frames": frames,
+            });
+            if json {
+                println!("{report}");
+            } else {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            }
+        }
+    }
+    Ok(())
+}

@@ -41,7 +41,7 @@ struct Pair {
     sdf_kind: u32,
     job_first: u32,
     job_count: u32,
-    _pad: u32,
+    sdf_scale: f32,
     contact_offset: f32,
     radius: f32,
     area_unit: f32,

@@ -103,14 +103,19 @@ impl Xf {
 }
 
 /// Signed distance and gradient of the pair's SDF shape at `p` (shape frame), as `sdf_sample` in WGSL.
-pub fn sdf_sample_cpu(pair: &PairGpu, sdf_values: &[f32], p: Vec3) -> (f32, Vec3) {
+pub fn sdf_sample_cpu(pair: &PairGpu, sdf_values: &[u32], p: Vec3) -> (f32, Vec3) {
     if pair.sdf_kind == 1 {
         return (p.z, Vec3::Z);
     }
     let lo = Vec3::new(pair.sdf_origin[0], pair.sdf_origin[1], pair.sdf_origin[2]);
     let h = pair.sdf_origin[3];
     let dims = glam::UVec3::new(pair.sdf_dims[0], pair.sdf_dims[1], pair.sdf_dims[2]);
-    let at = |i: u32, j: u32, k: u32| sdf_values[(pair.sdf_dims[3] + i + dims.x * (j + dims.y * k)) as usize];
+    let at = |i: u32, j: u32, k: u32| {
+        let idx = pair.sdf_dims[3] + i + dims.x * (j + dims.y * k);
+        let word = sdf_values[(idx >> 1) as usize];
+        let half = if idx & 1 == 1 { word & 0xffff_0000 } else { word << 16 };
+        ((half as i32) >> 16) as f32 * pair.sdf_scale
+    };
     let hi = lo + h * (dims - glam::UVec3::ONE).as_vec3();
     let q = p.clamp(lo, hi);
     let g = (q - lo) / h;
@@ -143,7 +148,7 @@ pub fn sdf_sample_cpu(pair: &PairGpu, sdf_values: &[f32], p: Vec3) -> (f32, Vec3
 /// Point of least signed distance on triangle (a, b, c) and the sample there (`minimise_on_triangle`).
 pub fn minimise_on_triangle_cpu(
     pair: &PairGpu,
-    sdf: &[f32],
+    sdf: &[u32],
     a: Vec3,
     b: Vec3,
     c: Vec3,
@@ -201,7 +206,7 @@ pub fn minimise_on_triangle_cpu(
 }
 
 /// The candidate of one query triangle given in the SDF shape's frame (or EMPTY), as in `generate`.
-pub fn triangle_candidate_cpu(pair: &PairGpu, sdf: &[f32], a: Vec3, b: Vec3, c: Vec3, iterations: u32) -> Candidate {
+pub fn triangle_candidate_cpu(pair: &PairGpu, sdf: &[u32], a: Vec3, b: Vec3, c: Vec3, iterations: u32) -> Candidate {
     let centroid = (a + b + c) / 3.0;
     let reach = (a - centroid)
         .dot(a - centroid)

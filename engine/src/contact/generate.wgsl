@@ -17,7 +17,7 @@ struct Job {
 @group(0) @binding(1) var<storage, read> pairs: array<Pair>;
 @group(0) @binding(2) var<storage, read> jobs: array<Job>;
 @group(0) @binding(3) var<storage, read> tri_verts: array<vec4<f32>>;
-@group(0) @binding(4) var<storage, read> sdf_values: array<f32>;
+@group(0) @binding(4) var<storage, read> sdf_values: array<u32>;  // i16 pairs, see model.rs
 @group(1) @binding(0) var<storage, read> body_q: array<Transform>;
 @group(2) @binding(0) var<storage, read_write> job_patches: array<PatchOut>;
 @group(2) @binding(1) var<storage, read_write> job_patch_count: array<u32>;
@@ -30,7 +30,10 @@ struct Sample {
 
 fn sdf_at(pair: Pair, i: u32, j: u32, k: u32) -> f32 {
     let dims = pair.sdf_dims.xyz;
-    return sdf_values[pair.sdf_dims.w + i + dims.x * (j + dims.y * k)];
+    let idx = pair.sdf_dims.w + i + dims.x * (j + dims.y * k);
+    let word = sdf_values[idx >> 1u];
+    let half = select(word << 16u, word & 0xffff0000u, (idx & 1u) == 1u);
+    return f32(bitcast<i32>(half) >> 16u) * pair.sdf_scale;
 }
 
 // Trilinear value and its exact gradient; outside the grid box the distance to the box is added.

@@ -90,7 +90,8 @@ pub struct PairGpu {
     pub sdf_kind: u32,
     pub job_first: u32,
     pub job_count: u32,
-    pub _pad: u32,
+    /// Metres per unit of the 16-bit quantised SDF values.
+    pub sdf_scale: f32,
     pub contact_offset: f32,
     pub radius: f32,
     /// Area quantum for the patch measure [m^2].
@@ -149,8 +150,9 @@ pub struct FlatModel {
     pub jobs: Vec<JobGpu>,
     /// Triangle corners, 3 per triangle, xyz [m] (w unused), shape [triangle_count * 3].
     pub tri_verts: Vec<[f32; 4]>,
-    /// All SDF grids' values [m], concatenated.
-    pub sdf_values: Vec<f32>,
+    /// All SDF grids' values, quantised to i16 (value = q * `sdf_scale` [m]) and packed two per word,
+    /// low half first; each grid starts at an even value index.
+    pub sdf_values: Vec<u32>,
 }
 
 fn pose4(p: Vec3) -> [f32; 4] {
@@ -199,20 +201,21 @@ impl ContactModel {
                 }
             };
             let tri_count = p.query.triangles.len() as u32;
-            let (sdf_kind, sdf_origin, sdf_dims) = match &p.sdf {
-                SdfShape::Plane => (1u32, [0.0; 4], [2, 2, 2, 0]),
+            let (sdf_kind, sdf_origin, sdf_dims, sdf_scale) = match &p.sdf {
+                SdfShape::Plane => (1u32, [0.0; 4], [2, 2, 2, 0], 0.0),
                 SdfShape::Grid(g) => {
                     let key = Arc::as_ptr(g);
+                    let scale = sdf_quantum(g.spacing);
                     let off = match grid_offset.iter().find(|(k, _)| *k == key) {
                         Some(&(_, o)) => o,
                         None => {
-                            let o = flat.sdf_values.len() as u32;
-                            flat.sdf_values.extend_from_slice(&g.values);
+                            let o = 2 * flat.sdf_values.len() as u32;
+                            flat.sdf_values.extend(pack_i16(&g.values, scale));
                             grid_offset.push((key, o));
                             o
                         }
                     };
-                    (0, [g.origin.x, g.origin.y, g.origin.z, g.spacing], [g.dims.x, g.dims.y, g.dims.z, off])
+                    (0, [g.origin.x, g.origin.y, g.origin.z, g.spacing], [g.dims.x, g.dims.y, g.dims.z, off], scale)
                 }
             };
             // Area quantum: 1/64 of the mean triangle area, so patch measures resolve small triangles.
@@ -247,7 +250,7 @@ impl ContactModel {
                 sdf_kind,
                 job_first,
                 job_count: flat.jobs.len() as u32 - job_first,
-                _pad: 0,
+                sdf_scale,
                 contact_offset: p.contact_offset,
                 radius: p.query.radius,
                 area_unit,
@@ -259,7 +262,7 @@ impl ContactModel {
             flat.tri_verts.push([0.0; 4]);
         }
         if flat.sdf_values.is_empty() {
-            flat.sdf_values.push(0.0);
+            flat.sdf_values.push(0);
         }
         Ok(flat)
     }
@@ -268,6 +271,20 @@ impl ContactModel {
     pub fn max_triangles(&self) -> u32 {
         self.pairs.iter().map(|p| p.query.triangles.len() as u32).max().unwrap_or(0)
     }
+}
+
+/// Quantum of the 16-bit SDF storage for a grid of `spacing` [m]: 1/256 of a voxel, so values within
+/// 128 voxels of the surface are stored to 0.2% of a voxel and farther ones are clamped (still a valid
+/// lower bound for culling). Halving the f32 grid lets a 512-resolution bolt (~46M samples) fit the
+/// 128 MiB storage-buffer binding limit of many adapters (lavapipe's included).
+pub fn sdf_quantum(spacing: f32) -> f32 {
+    spacing / 256.0
+}
+
+/// Quantises values [m] to i16 units of `scale` and packs them two per u32 (low half first).
+pub fn pack_i16(values: &[f32], scale: f32) -> Vec<u32> {
+    let q = |v: f32| ((v / scale).round().clamp(-32767.0, 32767.0) as i16) as u16 as u32;
+    values.chunks(2).map(|c| q(c[0]) | (c.get(1).map_or(0, |&v| q(v)) << 16)).collect()
 }
 
 /// Triangles per job: enough workgroups to fill the device (~64) without splitting pairs needlessly.

@@ -103,6 +103,18 @@ impl ContactPipeline {
         let chunk =
             if cfg.chunk_triangles == 0 { auto_chunk(model.max_triangles(), world_count) } else { cfg.chunk_triangles };
         let flat = model.flatten(chunk)?;
+        for (what, bytes) in
+            [("SDF values", flat.sdf_values.len() as u64 * 4), ("query triangles", flat.tri_verts.len() as u64 * 16)]
+        {
+            if bytes > limits.max_storage_buffer_binding_size {
+                return Err(EngineError::TooLarge {
+                    what: format!("the {what} buffer"),
+                    needed_bytes: bytes,
+                    limit_bytes: limits.max_storage_buffer_binding_size,
+                    hint: format!("adapter {:?} limits max_storage_buffer_binding_size; lower the SDF resolution or the mesh size", gpu.info.name),
+                });
+            }
+        }
         let job_count = flat.jobs.len() as u32;
         let pair_count = flat.pairs.len() as u32;
         let p = params(&flat, model.body_count, world_count, cfg);

@@ -1,0 +1,4 @@
+//! factory-bench: the scenes and measurements behind `factory-bench` (paper Tables I and II) and the
+//! accuracy tests that share them.
+
+pub mod contact_scene;
