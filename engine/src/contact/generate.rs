@@ -29,6 +29,21 @@ pub(crate) fn compute_pipeline(device: &wgpu::Device, label: &str, source: &str,
     })
 }
 
+/// Records `pipeline` with its three bind groups (model, state in, state out) over x by y workgroups.
+pub(crate) fn dispatch_compute(
+    pass: &mut wgpu::ComputePass,
+    pipeline: &wgpu::ComputePipeline,
+    groups: [&wgpu::BindGroup; 3],
+    x: u32,
+    y: u32,
+) {
+    pass.set_pipeline(pipeline);
+    for (i, g) in groups.iter().enumerate() {
+        pass.set_bind_group(i as u32, *g, &[]);
+    }
+    pass.dispatch_workgroups(x, y, 1);
+}
+
 /// The generation pipeline.
 pub struct GenerateKernel {
     pub pipeline: wgpu::ComputePipeline,
@@ -108,41 +123,13 @@ pub fn sdf_sample_cpu(pair: &PairGpu, sdf_values: &[u32], p: Vec3) -> (f32, Vec3
         return (p.z, Vec3::Z);
     }
     let lo = Vec3::new(pair.sdf_origin[0], pair.sdf_origin[1], pair.sdf_origin[2]);
-    let h = pair.sdf_origin[3];
     let dims = glam::UVec3::new(pair.sdf_dims[0], pair.sdf_dims[1], pair.sdf_dims[2]);
-    let at = |i: u32, j: u32, k: u32| {
+    crate::sdf::trilinear(lo, pair.sdf_origin[3], dims, p, |i, j, k| {
         let idx = pair.sdf_dims[3] + i + dims.x * (j + dims.y * k);
         let word = sdf_values[(idx >> 1) as usize];
         let half = if idx & 1 == 1 { word & 0xffff_0000 } else { word << 16 };
         ((half as i32) >> 16) as f32 * pair.sdf_scale
-    };
-    let hi = lo + h * (dims - glam::UVec3::ONE).as_vec3();
-    let q = p.clamp(lo, hi);
-    let g = (q - lo) / h;
-    let cell = g.floor().as_uvec3().min(dims - glam::UVec3::splat(2));
-    let f = g - cell.as_vec3();
-    let (x, y, z) = (cell.x, cell.y, cell.z);
-    let (c000, c100, c010, c110) = (at(x, y, z), at(x + 1, y, z), at(x, y + 1, z), at(x + 1, y + 1, z));
-    let (c001, c101, c011, c111) = (at(x, y, z + 1), at(x + 1, y, z + 1), at(x, y + 1, z + 1), at(x + 1, y + 1, z + 1));
-    let x00 = c000 + (c100 - c000) * f.x;
-    let x10 = c010 + (c110 - c010) * f.x;
-    let x01 = c001 + (c101 - c001) * f.x;
-    let x11 = c011 + (c111 - c011) * f.x;
-    let y0 = x00 + (x10 - x00) * f.y;
-    let y1 = x01 + (x11 - x01) * f.y;
-    let d = y0 + (y1 - y0) * f.z;
-    let ya = (c100 - c000) + ((c110 - c010) - (c100 - c000)) * f.y;
-    let yb = (c101 - c001) + ((c111 - c011) - (c101 - c001)) * f.y;
-    let dx = ya + (yb - ya) * f.z;
-    let dy = (x10 - x00) + ((x11 - x01) - (x10 - x00)) * f.z;
-    let dz = y1 - y0;
-    let out = p - q;
-    let out_len = out.length();
-    if out_len > 0.0 {
-        (d + out_len, out / out_len)
-    } else {
-        (d, Vec3::new(dx, dy, dz) / h)
-    }
+    })
 }
 
 /// Point of least signed distance on triangle (a, b, c) and the sample there (`minimise_on_triangle`).

@@ -1,6 +1,6 @@
 //! Patch merge kernel (merge.wgsl): combines a pair's per-job patches; CPU twin [`merge_cpu`].
 
-use super::generate::{compute_pipeline, shader_source};
+use super::generate::{compute_pipeline, dispatch_compute, shader_source};
 use super::model::{PairGpu, PatchGpu};
 use super::reduce::{Candidate, Reducer, BATCH};
 use super::ContactConfig;
@@ -28,11 +28,7 @@ impl MergeKernel {
         pair_count: u32,
         world_count: u32,
     ) {
-        pass.set_pipeline(&self.pipeline);
-        for (i, g) in groups.iter().enumerate() {
-            pass.set_bind_group(i as u32, *g, &[]);
-        }
-        pass.dispatch_workgroups(pair_count, world_count, 1);
+        dispatch_compute(pass, &self.pipeline, groups, pair_count, world_count);
     }
 }
 

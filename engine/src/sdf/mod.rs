@@ -45,36 +45,46 @@ impl SdfGrid {
     /// trilinear interpolation and its exact derivative. Outside: the value at the nearest box point plus
     /// the distance to it, with the gradient pointing away from the box, so the field stays a valid bound.
     pub fn sample(&self, p: Vec3) -> (f32, Vec3) {
-        let lo = self.origin;
-        let hi = self.max_corner();
-        let q = p.clamp(lo, hi);
-        let g = (q - lo) / self.spacing;
-        let cell = g.floor().as_uvec3().min(self.dims - UVec3::splat(2));
-        let f = g - cell.as_vec3();
-        let c = |di: u32, dj: u32, dk: u32| self.values[self.index(cell.x + di, cell.y + dj, cell.z + dk)];
-        let (c000, c100, c010, c110) = (c(0, 0, 0), c(1, 0, 0), c(0, 1, 0), c(1, 1, 0));
-        let (c001, c101, c011, c111) = (c(0, 0, 1), c(1, 0, 1), c(0, 1, 1), c(1, 1, 1));
-        let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
-        let (x00, x10) = (lerp(c000, c100, f.x), lerp(c010, c110, f.x));
-        let (x01, x11) = (lerp(c001, c101, f.x), lerp(c011, c111, f.x));
-        let (y0, y1) = (lerp(x00, x10, f.y), lerp(x01, x11, f.y));
-        let d = lerp(y0, y1, f.z);
-        let dx = lerp(lerp(c100 - c000, c110 - c010, f.y), lerp(c101 - c001, c111 - c011, f.y), f.z);
-        let dy = lerp(x10 - x00, x11 - x01, f.z);
-        let dz = y1 - y0;
-        let grad = Vec3::new(dx, dy, dz) / self.spacing;
-        let out = p - q;
-        let out_len = out.length();
-        if out_len > 0.0 {
-            (d + out_len, out / out_len)
-        } else {
-            (d, grad)
-        }
+        trilinear(self.origin, self.spacing, self.dims, p, |i, j, k| self.values[self.index(i, j, k)])
     }
 
     /// Bytes the grid occupies.
     pub fn byte_size(&self) -> u64 {
         self.values.len() as u64 * 4
+    }
+}
+
+/// Trilinear value and exact gradient of a sampled field at `p`: `at(i, j, k)` reads sample (i, j, k) of a
+/// grid with sample 0 at `lo`, spacing `h` and `dims` samples. Outside the box the distance to the box is
+/// added and the gradient points away from it. Shared by [`SdfGrid::sample`] and the kernels' CPU twin
+/// (which reads 16-bit values); the WGSL `sdf_sample` performs the same operations in the same order.
+pub fn trilinear(lo: Vec3, h: f32, dims: UVec3, p: Vec3, at: impl Fn(u32, u32, u32) -> f32) -> (f32, Vec3) {
+    let hi = lo + h * (dims - UVec3::ONE).as_vec3();
+    let q = p.clamp(lo, hi);
+    let g = (q - lo) / h;
+    let cell = g.floor().as_uvec3().min(dims - UVec3::splat(2));
+    let f = g - cell.as_vec3();
+    let (x, y, z) = (cell.x, cell.y, cell.z);
+    let (c000, c100, c010, c110) = (at(x, y, z), at(x + 1, y, z), at(x, y + 1, z), at(x + 1, y + 1, z));
+    let (c001, c101, c011, c111) = (at(x, y, z + 1), at(x + 1, y, z + 1), at(x, y + 1, z + 1), at(x + 1, y + 1, z + 1));
+    let x00 = c000 + (c100 - c000) * f.x;
+    let x10 = c010 + (c110 - c010) * f.x;
+    let x01 = c001 + (c101 - c001) * f.x;
+    let x11 = c011 + (c111 - c011) * f.x;
+    let y0 = x00 + (x10 - x00) * f.y;
+    let y1 = x01 + (x11 - x01) * f.y;
+    let d = y0 + (y1 - y0) * f.z;
+    let ya = (c100 - c000) + ((c110 - c010) - (c100 - c000)) * f.y;
+    let yb = (c101 - c001) + ((c111 - c011) - (c101 - c001)) * f.y;
+    let dx = ya + (yb - ya) * f.z;
+    let dy = (x10 - x00) + ((x11 - x01) - (x10 - x00)) * f.z;
+    let dz = y1 - y0;
+    let out = p - q;
+    let out_len = out.length();
+    if out_len > 0.0 {
+        (d + out_len, out / out_len)
+    } else {
+        (d, Vec3::new(dx, dy, dz) / h)
     }
 }
 
