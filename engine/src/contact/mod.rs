@@ -21,6 +21,7 @@ pub mod merge;
 pub mod model;
 pub mod pipeline;
 pub mod reduce;
+pub mod roles;
 
 pub use model::{ContactModel, PairSpec, QueryShape, SdfShape, NO_BODY};
 pub use pipeline::{contacts_cpu, ContactPipeline, ContactsHost, TransformGpu};
