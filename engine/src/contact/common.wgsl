@@ -89,12 +89,11 @@ fn ordered(f: f32) -> u32 {
 
 var<workgroup> cand_pd: array<vec4<f32>, WG>;      // point xyz, depth w (EMPTY: no candidate)
 var<workgroup> cand_n: array<vec4<f32>, WG>;       // unit normal xyz, area units w
-var<workgroup> cand_patch: array<u32, WG>;         // patch index, UNASSIGNED or NONE
 var<workgroup> patch_n: array<vec4<f32>, PATCH_CAP>;        // seed normal xyz
 var<workgroup> patch_area: array<atomic<u32>, PATCH_CAP>;   // member area [area units]
 var<workgroup> patch_slot: array<vec4<f32>, PATCH_CAP * 4u>;          // 4 per patch: point xyz, depth w
 var<workgroup> patch_key: array<atomic<u32>, PATCH_CAP>;
-var<workgroup> wg_best: atomic<u32>;
+var<workgroup> wg_best: array<atomic<u32>, 2>;  // FindDeepest keys, double-buffered by loop parity
 var<workgroup> wg_u32: u32;
 var<workgroup> patch_count: u32;
 
@@ -107,6 +106,8 @@ fn reset_patches(lid: u32) {
     }
     if (lid == 0u) {
         patch_count = 0u;
+        atomicStore(&wg_best[0], 0u);
+        atomicStore(&wg_best[1], 0u);
     }
     workgroupBarrier();
 }
@@ -144,69 +145,89 @@ fn measure(p: u32, offset: f32) -> f32 {
     return f32(atomicLoad(&patch_area[p])) * (offset - patch_slot[p * 4u].w);
 }
 
-// Reduces the batch in cand_* into the workgroup's patch list. Every invocation must call it.
-fn reduce_batch(lid: u32, normal_cos: f32, offset: f32, min_sep: f32) {
+// Key that a valid candidate already binned by Assign posts to wg_best in the first round: below every
+// FindDeepest key (those have ordered(-depth) >= ordered(-offset) > IDX_MASK), so it only tells the
+// workgroup that the batch has members and needs the slot rounds.
+const ASSIGNED_ONLY: u32 = 0x200u;
+
+// Reduces the batch in cand_* into the workgroup's patch list; `pc0` is the patch count before the batch
+// (workgroup-uniform; the caller keeps it) and the count after it is returned. Every invocation must call
+// it, after writing its cand_pd / cand_n slot.
+//
+// Barriers are the cost on lavapipe (it runs a workgroup as 32 8-wide coroutines, resumed once per barrier
+// region) and they serialise warps on a GPU, so each step is placed to need as few as possible:
+// - the seed's normal is read from cand_n (stable during the batch), so binning needs no barrier after
+//   AddPatch writes the patch; a fresh patch index's area is still 0 from reset_patches (the temporary
+//   patch MAX_PATCHES is zeroed after each use), so members can add to it at once;
+// - wg_best is double-buffered: the buffer of round i+1 is zeroed during round i, before the barrier that
+//   ends every read of it from round i-1, so a round costs one workgroupUniformLoad (2 barriers), plus 3
+//   when the budget is full and a victim must be chosen;
+// - each slot round initialises the next round's keys in the region that writes its slots (2 barriers
+//   per round), and a batch whose invocations have no candidate skips the slot rounds.
+fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) -> u32 {
+    workgroupBarrier(); // cand_* written
     // Assign: the most similar existing patch above the threshold.
-    let pc0 = workgroupUniformLoad(&patch_count);
     let my = cand_pd[lid];
     let my_n = cand_n[lid];
     let units = u32(my_n.w);
+    var mine = NONE;
     if (my.w < VALID_BELOW) {
         var best = normal_cos;
-        var assigned = UNASSIGNED;
+        mine = UNASSIGNED;
         for (var p = 0u; p < pc0; p++) {
             let d = dot(my_n.xyz, patch_n[p].xyz);
             if (d >= best) {
                 best = d;
-                assigned = p;
+                mine = p;
             }
         }
-        cand_patch[lid] = assigned;
-        if (assigned != UNASSIGNED) {
-            atomicAdd(&patch_area[assigned], units);
+        if (mine != UNASSIGNED) {
+            atomicAdd(&patch_area[mine], units);
         }
-    } else {
-        cand_patch[lid] = NONE;
     }
-    // New patches: FindDeepest, BinReduce, AddPatch until every candidate is binned.
-    loop {
+    // New patches: FindDeepest, BinReduce, AddPatch until every candidate is binned. `mine` is this
+    // candidate's patch index, UNASSIGNED or NONE; only its own invocation needs it.
+    var pc = pc0;
+    var any_member = false;
+    for (var round = 0u; ; round++) {
+        let b = round & 1u;
+        if (mine == UNASSIGNED) {
+            atomicMax(&wg_best[b], ordered(-my.w) | (lid + 1u));
+        } else if (round == 0u && mine != NONE) {
+            atomicMax(&wg_best[b], ASSIGNED_ONLY);
+        }
         if (lid == 0u) {
-            atomicStore(&wg_best, 0u);
+            atomicStore(&wg_best[b ^ 1u], 0u);
         }
-        workgroupBarrier();
-        if (cand_patch[lid] == UNASSIGNED) {
-            atomicMax(&wg_best, ordered(-my.w) | (lid + 1u));
+        let best = workgroupUniformLoad(&wg_best[b]);
+        if (round == 0u) {
+            any_member = best != 0u;
         }
-        workgroupBarrier();
-        if (lid == 0u) {
-            wg_u32 = atomicLoad(&wg_best);
-        }
-        let best = workgroupUniformLoad(&wg_u32);
-        if (best == 0u) {
+        if (best <= IDX_MASK) {
+            if (lid == 0u) {
+                atomicStore(&wg_best[b], 0u);
+            }
             break;
         }
         let seed = (best & IDX_MASK) - 1u;
-        let idx = min(workgroupUniformLoad(&patch_count), MAX_PATCHES);
+        let seed_n = cand_n[seed].xyz;
+        let idx = min(pc, MAX_PATCHES);
         if (lid == 0u) {
-            patch_n[idx] = vec4<f32>(cand_n[seed].xyz, 0.0);
-            atomicStore(&patch_area[idx], 0u);
+            patch_n[idx] = vec4<f32>(seed_n, 0.0);
             patch_slot[idx * 4u] = cand_pd[seed];
             for (var s = 1u; s < 4u; s++) {
                 patch_slot[idx * 4u + s] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
             }
         }
-        workgroupBarrier();
-        if (cand_patch[lid] == UNASSIGNED && dot(my_n.xyz, patch_n[idx].xyz) >= normal_cos) {
-            cand_patch[lid] = idx;
+        if (mine == UNASSIGNED && dot(my_n.xyz, seed_n) >= normal_cos) {
+            mine = idx;
             atomicAdd(&patch_area[idx], units);
         }
-        workgroupBarrier();
         if (idx < MAX_PATCHES) {
-            if (lid == 0u) {
-                patch_count = idx + 1u;
-            }
+            pc = idx + 1u;
         } else {
             // Budget full: the new patch replaces the existing one of lowest measure if it measures more.
+            workgroupBarrier();
             if (lid == 0u) {
                 var victim = 0u;
                 var lowest = measure(0u, offset);
@@ -227,37 +248,33 @@ fn reduce_batch(lid: u32, normal_cos: f32, offset: f32, min_sep: f32) {
                 } else {
                     wg_u32 = NONE;
                 }
+                atomicStore(&patch_area[MAX_PATCHES], 0u);
             }
             let victim = workgroupUniformLoad(&wg_u32);
-            let c = cand_patch[lid];
-            if (c == MAX_PATCHES) {
-                cand_patch[lid] = victim;
-            } else if (c == victim) {
-                cand_patch[lid] = NONE;
+            if (mine == MAX_PATCHES) {
+                mine = victim;
+            } else if (mine == victim) {
+                mine = NONE;
             }
         }
-        workgroupBarrier();
+    }
+    if (lid == 0u) {
+        patch_count = pc;
+    }
+    if (!any_member) {
+        return pc; // no candidate in the batch: the slot rounds would change nothing
     }
     // Slots: 4 rounds, each an atomic arg-max per patch over the current slot and this batch's members.
-    let pc = workgroupUniformLoad(&patch_count);
+    // The patches written above are visible: the last workgroupUniformLoad of the loop was a barrier.
+    if (lid < pc) {
+        atomicStore(&patch_key[lid], slot_key(0u, lid, min_sep));
+    }
     for (var k = 0u; k < 4u; k++) {
-        if (lid < pc) {
-            let s = patch_slot[lid * 4u + k];
-            var key0 = 0u;
-            if (s.w < VALID_BELOW) {
-                let m = slot_metric(k, lid, s.xyz, s.w, min_sep);
-                if (m > NEG_INF) {
-                    key0 = ordered(m);
-                }
-            }
-            atomicStore(&patch_key[lid], key0);
-        }
         workgroupBarrier();
-        let c = cand_patch[lid];
-        if (c < MAX_PATCHES) {
-            let m = slot_metric(k, c, my.xyz, my.w, min_sep);
+        if (mine < MAX_PATCHES) {
+            let m = slot_metric(k, mine, my.xyz, my.w, min_sep);
             if (m > NEG_INF) {
-                atomicMax(&patch_key[c], ordered(m) | (lid + 1u));
+                atomicMax(&patch_key[mine], ordered(m) | (lid + 1u));
             }
         }
         workgroupBarrier();
@@ -266,7 +283,23 @@ fn reduce_batch(lid: u32, normal_cos: f32, offset: f32, min_sep: f32) {
             if (code != 0u) {
                 patch_slot[lid * 4u + k] = cand_pd[code - 1u];
             }
+            if (k < 3u) {
+                atomicStore(&patch_key[lid], slot_key(k + 1u, lid, min_sep));
+            }
         }
-        workgroupBarrier();
     }
+    workgroupBarrier(); // slots read cand_pd: the caller may overwrite it after this
+    return pc;
+}
+
+// Initial key of slot k of patch p: its current contact's metric, 0 when empty or not eligible.
+fn slot_key(k: u32, p: u32, min_sep: f32) -> u32 {
+    let s = patch_slot[p * 4u + k];
+    if (s.w < VALID_BELOW) {
+        let m = slot_metric(k, p, s.xyz, s.w, min_sep);
+        if (m > NEG_INF) {
+            return ordered(m);
+        }
+    }
+    return 0u;
 }

@@ -171,6 +171,7 @@ fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wi
     let b_from_a = xf_mul(xf_inv(world_b), world_a);
     let offset = pair.contact_offset;
     reset_patches(lid);
+    var pc = 0u;
     var found = 0u;
     for (var base = 0u; base < job.tri_count; base += WG) {
         var cand = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
@@ -202,13 +203,13 @@ fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wi
         }
         cand_pd[lid] = cand;
         cand_n[lid] = normal;
-        reduce_batch(lid, params.normal_cos, offset, pair.min_separation);
+        pc = reduce_batch(lid, pc, params.normal_cos, offset, pair.min_separation);
     }
     if (found > 0u) {
         atomicAdd(&pair_candidates[world * params.pair_count + job.pair], found);
     }
-    // Write this job's patches in world coordinates.
-    let pc = workgroupUniformLoad(&patch_count);
+    // Write this job's patches in world coordinates (reduce_batch ended with a barrier after its last
+    // patch write).
     let out_base = (world * params.job_count + job_index) * MAX_PATCHES;
     if (lid < pc) {
         var o: PatchOut;
