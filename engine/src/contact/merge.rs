@@ -35,28 +35,26 @@ impl MergeKernel {
 /// CPU twin of one merge workgroup: the pair's job outputs in job order.
 pub fn merge_cpu(pair: &PairGpu, job_patches: &[&[PatchGpu]], cfg: &ContactConfig) -> Vec<PatchGpu> {
     let mut red = Reducer::new(cfg.max_patches);
-    for patches in job_patches {
-        let count = patches.len() * 4;
-        let mut base = 0;
-        while base < count {
-            let cands: Vec<Candidate> = (base..(base + BATCH).min(count))
-                .map(|i| {
-                    let p = &patches[i / 4];
-                    let sl = p.slots[i % 4];
-                    if sl[3] >= 1e38 {
-                        return Candidate::EMPTY;
-                    }
-                    let used = p.slots.iter().filter(|s| s[3] < 1e38).count() as u32;
-                    let units = p.normal[3] / (used as f32 * pair.area_unit);
-                    Candidate {
-                        pd: Vec4::from_array(sl),
-                        n: Vec4::new(p.normal[0], p.normal[1], p.normal[2], (units.round() as u32).max(1) as f32),
-                    }
-                })
-                .collect();
-            red.reduce_batch(&cands, cfg.normal_cos, pair.contact_offset, pair.min_separation);
-            base += BATCH;
-        }
+    // All jobs' slots as one stream cut into batches of BATCH, as merge.wgsl does.
+    let stream: Vec<Candidate> = job_patches
+        .iter()
+        .flat_map(|patches| patches.iter())
+        .flat_map(|p| {
+            p.slots.iter().map(move |&sl| {
+                if sl[3] >= 1e38 {
+                    return Candidate::EMPTY;
+                }
+                let used = p.slots.iter().filter(|s| s[3] < 1e38).count() as u32;
+                let units = p.normal[3] / (used as f32 * pair.area_unit);
+                Candidate {
+                    pd: Vec4::from_array(sl),
+                    n: Vec4::new(p.normal[0], p.normal[1], p.normal[2], (units.round() as u32).max(1) as f32),
+                }
+            })
+        })
+        .collect();
+    for batch in stream.chunks(BATCH) {
+        red.reduce_batch(batch, cfg.normal_cos, pair.contact_offset, pair.min_separation);
     }
     red.patches(pair.area_unit)
 }

@@ -15,32 +15,57 @@ fn merge(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: 
     let world = wid.y + params.world_offset;
     let pair = pairs[pair_index];
     reset_patches(lid);
+    var pc = 0u;
+    // The jobs' slots form one stream (job by job, 4 slots per patch), cut into batches of WG: most jobs
+    // hold far fewer than WG slots, and a batch costs the same (its barriers and slot rounds) however few
+    // candidates it holds.
     let job_base = world * params.job_count + pair.job_first;
+    var total = 0u;
     for (var j = 0u; j < pair.job_count; j++) {
-        let count = job_patch_count[job_base + j] * 4u;
-        for (var base = 0u; base < count; base += WG) {
-            var cand = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
-            var normal = vec4<f32>(0.0);
-            let i = base + lid;
-            if (i < count) {
-                let p = job_patches[(job_base + j) * MAX_PATCHES + i / 4u];
-                let sl = p.slots[i % 4u];
-                if (sl.w < VALID_BELOW) {
-                    var used = 0u;
-                    for (var s = 0u; s < 4u; s++) {
-                        used += select(0u, 1u, p.slots[s].w < VALID_BELOW);
-                    }
-                    cand = sl;
-                    let units = p.normal.w / (f32(used) * pair.area_unit);
-                    normal = vec4<f32>(p.normal.xyz, f32(max(1u, u32(round(units)))));
-                }
-            }
-            cand_pd[lid] = cand;
-            cand_n[lid] = normal;
-            reduce_batch(lid, params.normal_cos, pair.contact_offset, pair.min_separation);
-        }
+        total += job_patch_count[job_base + j] * 4u;
     }
-    let pc = workgroupUniformLoad(&patch_count);
+    var first_job = 0u; // the job holding stream index `base`, and its first index
+    var first_off = 0u;
+    for (var base = 0u; base < total; base += WG) {
+        loop {
+            let n = job_patch_count[job_base + first_job] * 4u;
+            if (first_off + n > base) {
+                break;
+            }
+            first_off += n;
+            first_job++;
+        }
+        var cand = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
+        var normal = vec4<f32>(0.0);
+        let i = base + lid;
+        if (i < total) {
+            var j = first_job;
+            var off = first_off;
+            loop {
+                let n = job_patch_count[job_base + j] * 4u;
+                if (i < off + n) {
+                    break;
+                }
+                off += n;
+                j++;
+            }
+            let k = i - off;
+            let p = job_patches[(job_base + j) * MAX_PATCHES + k / 4u];
+            let sl = p.slots[k % 4u];
+            if (sl.w < VALID_BELOW) {
+                var used = 0u;
+                for (var s = 0u; s < 4u; s++) {
+                    used += select(0u, 1u, p.slots[s].w < VALID_BELOW);
+                }
+                cand = sl;
+                let units = p.normal.w / (f32(used) * pair.area_unit);
+                normal = vec4<f32>(p.normal.xyz, f32(max(1u, u32(round(units)))));
+            }
+        }
+        cand_pd[lid] = cand;
+        cand_n[lid] = normal;
+        pc = reduce_batch(lid, pc, params.normal_cos, pair.contact_offset, pair.min_separation);
+    }
     let out_base = (world * params.pair_count + pair_index) * MAX_PATCHES;
     if (lid < pc) {
         var o: PatchOut;
