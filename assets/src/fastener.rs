@@ -214,3 +214,27 @@ mod tests {
         }
     }
 }
+
+impl NutBolt {
+    /// The bolt's exact (analytic) signed distance field, for the engine's `SdfShape::Thread`: the same
+    /// profile, phase, thread span and hexagonal head as the bolt mesh, without the mesh's chordal error
+    /// (the mesh samples the helix on `segments_per_turn` columns) or a grid's interpolation error.
+    pub fn bolt_sdf(&self) -> factory_engine::sdf::thread::ThreadSdf {
+        let prof = self.spec.bolt_profile();
+        let d = &self.dims;
+        factory_engine::sdf::thread::ThreadSdf {
+            pitch: prof.pitch as f32,
+            phase: self.thread_phase,
+            pitch_radius: prof.pitch_radius as f32,
+            min_radius: prof.min_radius as f32,
+            max_radius: prof.max_radius as f32,
+            z_lo: d.head_height as f32,
+            z_hi: (d.head_height + d.shank_length) as f32,
+            head: Some(factory_engine::sdf::thread::HexPrism {
+                apothem: (0.5 * d.width_across_flats) as f32,
+                z0: 0.0,
+                z1: d.head_height as f32,
+            }),
+        }
+    }
+}

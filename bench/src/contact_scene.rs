@@ -9,6 +9,7 @@ use factory_engine::gpu::GpuContext;
 use factory_engine::mesh::TriMesh;
 use factory_engine::sdf::bake::BakeParams;
 use factory_engine::sdf::cache::SdfCache;
+use factory_engine::sdf::thread::ThreadSdf;
 use factory_engine::sdf::SdfGrid;
 use glam::{Quat, Vec3};
 use std::sync::Arc;
@@ -32,8 +33,8 @@ pub struct PartPair {
 pub struct ContactScene {
     pub pair: PartPair,
     pub model: ContactModel,
-    /// SDF grid of the SDF part (None for analytic shapes).
-    pub grid: Arc<SdfGrid>,
+    /// SDF grid of the SDF part (None for an analytic SDF).
+    pub grid: Option<Arc<SdfGrid>>,
     /// Index (0 = a, 1 = b) of the part whose SDF is used; the other is queried.
     pub sdf_part: usize,
     pub query_triangles: usize,
@@ -42,21 +43,31 @@ pub struct ContactScene {
 
 impl ContactScene {
     /// Builds the scene with Factory's roles: both parts carry an SDF tag, so the one with more triangles
-    /// is the SDF and the other's triangles are queried.
+    /// is the SDF (baked at `sdf_resolution`, through the cache) and the other's triangles are queried.
     pub fn new(
         pair: PartPair,
         sdf_resolution: u32,
         contact_offset: f32,
         cache: &SdfCache,
     ) -> factory_engine::Result<Self> {
-        let PairRole::SdfMesh { sdf, query } =
-            pair_role([true, true], [pair.a.triangle_count(), pair.b.triangle_count()])
+        let PairRole::SdfMesh { sdf, .. } = pair_role([true, true], [pair.a.triangle_count(), pair.b.triangle_count()])
         else {
             unreachable!("both parts are tagged")
         };
+        let mesh = if sdf == 0 { &pair.a } else { &pair.b };
+        let grid = Arc::new(cache.get_or_bake(mesh, &BakeParams { resolution: sdf_resolution, ..Default::default() })?);
+        Ok(Self::with_sdf(pair, sdf, SdfShape::Grid(grid.clone()), Some(grid), contact_offset))
+    }
+
+    /// Builds the scene with the exact analytic SDF of a generated bolt (part b); part a's triangles are
+    /// queried against it.
+    pub fn with_thread_sdf(pair: PartPair, bolt: ThreadSdf, contact_offset: f32) -> Self {
+        Self::with_sdf(pair, 1, SdfShape::Thread(bolt), None, contact_offset)
+    }
+
+    fn with_sdf(pair: PartPair, sdf: usize, shape: SdfShape, grid: Option<Arc<SdfGrid>>, contact_offset: f32) -> Self {
+        let query = 1 - sdf;
         let meshes = [&pair.a, &pair.b];
-        let grid =
-            Arc::new(cache.get_or_bake(meshes[sdf], &BakeParams { resolution: sdf_resolution, ..Default::default() })?);
         let model = ContactModel {
             body_count: 2,
             pairs: vec![PairSpec {
@@ -65,18 +76,18 @@ impl ContactScene {
                 query: Arc::new(QueryShape::mesh(meshes[query])),
                 body_b: sdf as u32,
                 b_pose: (Vec3::ZERO, Quat::IDENTITY),
-                sdf: SdfShape::Grid(grid.clone()),
+                sdf: shape,
                 contact_offset,
             }],
         };
-        Ok(ContactScene {
+        ContactScene {
             query_triangles: meshes[query].triangle_count(),
             sdf_triangles: meshes[sdf].triangle_count(),
             pair,
             model,
             grid,
             sdf_part: sdf,
-        })
+        }
     }
 
     /// Poses of both bodies in every world: part a turned by `phase[w]` about z and raised by `lift` plus the

@@ -30,6 +30,12 @@ enum PairKind {
     PegHole,
 }
 
+#[derive(Clone, Copy, Debug, PartialEq, ValueEnum)]
+enum SdfKind {
+    Grid,
+    Analytic,
+}
+
 #[derive(Subcommand)]
 enum Cmd {
     /// Contact generation + reduction for N parallel copies of a shape pair (paper Table I).
@@ -55,12 +61,19 @@ enum Cmd {
         /// Thread pitch of the mesh pair [mm] (0 for unthreaded pairs).
         #[arg(long, default_value_t = 2.0)]
         pitch_mm: f32,
-        /// SDF resolution: samples along the SDF part's longest axis.
+        /// SDF resolution: samples along the SDF part's longest axis (grid SDFs).
         #[arg(long, default_value_t = 256)]
         sdf_res: u32,
+        /// SDF of the bolt: `grid` (baked from the mesh, as Factory) or `analytic` (exact thread field;
+        /// generated nut-bolt pairs only).
+        #[arg(long, value_enum, default_value = "grid")]
+        sdf: SdfKind,
         /// Patch budget per pair (16..=256).
         #[arg(long, default_value_t = 64)]
         patches: u32,
+        /// Candidates whose normals are within this angle of a patch's normal join it [deg].
+        #[arg(long, default_value_t = 10.0)]
+        normal_deg: f32,
         /// Contact offset [mm]: candidates farther than this are dropped.
         #[arg(long, default_value_t = 1.0)]
         offset_mm: f32,
@@ -87,13 +100,16 @@ fn main() -> Result<()> {
             mesh_b,
             pitch_mm,
             sdf_res,
+            sdf,
             patches,
+            normal_deg,
             offset_mm,
             frames,
             cpu,
             json,
         } => {
             let fit_v: Fit = fit.parse().map_err(|e| anyhow::anyhow!("--fit: {e}"))?;
+            let mut thread_sdf = None;
             let parts = match (mesh_a, mesh_b) {
                 (Some(a), Some(b)) => PartPair {
                     name: format!("{} / {}", a.display(), b.display()),
@@ -106,6 +122,7 @@ fn main() -> Result<()> {
                     PairKind::NutBolt => {
                         let s: IsoSize = size.parse().map_err(|e| anyhow::anyhow!("--size: {e}"))?;
                         let nb = nut_bolt(s, fit_v, &ThreadOptions::default())?;
+                        thread_sdf = Some(nb.bolt_sdf());
                         PartPair {
                             name: format!("nut-bolt {} {}", s.name(), fit_v.name()),
                             a: nb.nut.mesh,
@@ -129,8 +146,15 @@ fn main() -> Result<()> {
             };
             let cache = SdfCache::new(SdfCache::default_dir());
             let t_bake = Instant::now();
-            let scene =
-                ContactScene::new(parts, sdf_res, offset_mm * 1e-3, &cache).context("building the contact scene")?;
+            let scene = match (sdf, thread_sdf) {
+                (SdfKind::Grid, _) => {
+                    ContactScene::new(parts, sdf_res, offset_mm * 1e-3, &cache).context("building the contact scene")?
+                }
+                (SdfKind::Analytic, Some(t)) => ContactScene::with_thread_sdf(parts, t, offset_mm * 1e-3),
+                (SdfKind::Analytic, None) => {
+                    bail!("--sdf analytic needs a generated nut-bolt pair (--pair nut-bolt without --mesh-a/--mesh-b)")
+                }
+            };
             let bake_s = t_bake.elapsed().as_secs_f64();
             let gpu = GpuContext::global()?;
             // Threaded pairs: the nut raised by 5 whole pitches (threads in phase, centred in their axial
@@ -139,7 +163,8 @@ fn main() -> Result<()> {
             // Each world gets its own turn of the nut (threads kept in phase), so worlds differ.
             let phases: Vec<f32> = (0..worlds).map(|w| (w as f32 * 2.399963) % std::f32::consts::TAU).collect();
             let poses = scene.poses(lift, &phases);
-            let cfg = ContactConfig { max_patches: patches, ..Default::default() };
+            let cfg =
+                ContactConfig { max_patches: patches, normal_cos: normal_deg.to_radians().cos(), ..Default::default() };
             let pipe = ContactPipeline::new(gpu, &scene.model, worlds, &cfg)?;
             pipe.write_body_q(gpu, &poses);
             pipe.run(gpu);
@@ -177,10 +202,12 @@ fn main() -> Result<()> {
                 "software_adapter": gpu.is_software(),
                 "query_triangles": scene.query_triangles,
                 "sdf_triangles": scene.sdf_triangles,
-                "sdf_resolution": sdf_res,
-                "sdf_dims": [scene.grid.dims.x, scene.grid.dims.y, scene.grid.dims.z],
+                "sdf": if scene.grid.is_some() { "grid" } else { "analytic" },
+                "sdf_resolution": scene.grid.as_ref().map(|_| sdf_res),
+                "sdf_dims": scene.grid.as_ref().map(|g| [g.dims.x, g.dims.y, g.dims.z]),
                 "sdf_bake_or_load_s": bake_s,
                 "max_patches": patches,
+                "normal_bin_deg": normal_deg,
                 "contact_offset_mm": offset_mm,
                 "lift_mm": lift * 1e3,
                 "deepest_contact_um": min_depth(&out).map(|d| d * 1e6),

@@ -23,61 +23,6 @@ struct Job {
 @group(2) @binding(1) var<storage, read_write> job_patch_count: array<u32>;
 @group(2) @binding(2) var<storage, read_write> pair_candidates: array<atomic<u32>>;
 
-struct Sample {
-    d: f32,
-    g: vec3<f32>,
-}
-
-fn sdf_at(pair: Pair, i: u32, j: u32, k: u32) -> f32 {
-    let dims = pair.sdf_dims.xyz;
-    let idx = pair.sdf_dims.w + i + dims.x * (j + dims.y * k);
-    let word = sdf_values[idx >> 1u];
-    let half = select(word << 16u, word & 0xffff0000u, (idx & 1u) == 1u);
-    return f32(bitcast<i32>(half) >> 16u) * pair.sdf_scale;
-}
-
-// Trilinear value and its exact gradient; outside the grid box the distance to the box is added.
-// Mirrors SdfGrid::sample (kind 0) and the half-space z < 0 of the shape frame (kind 1).
-fn sdf_sample(pair: Pair, p: vec3<f32>) -> Sample {
-    if (pair.sdf_kind == 1u) {
-        return Sample(p.z, vec3<f32>(0.0, 0.0, 1.0));
-    }
-    let lo = pair.sdf_origin.xyz;
-    let h = pair.sdf_origin.w;
-    let dims = pair.sdf_dims.xyz;
-    let hi = lo + h * vec3<f32>(dims - vec3<u32>(1u));
-    let q = clamp(p, lo, hi);
-    let g = (q - lo) / h;
-    let cell = min(vec3<u32>(floor(g)), dims - vec3<u32>(2u));
-    let f = g - vec3<f32>(cell);
-    let c000 = sdf_at(pair, cell.x, cell.y, cell.z);
-    let c100 = sdf_at(pair, cell.x + 1u, cell.y, cell.z);
-    let c010 = sdf_at(pair, cell.x, cell.y + 1u, cell.z);
-    let c110 = sdf_at(pair, cell.x + 1u, cell.y + 1u, cell.z);
-    let c001 = sdf_at(pair, cell.x, cell.y, cell.z + 1u);
-    let c101 = sdf_at(pair, cell.x + 1u, cell.y, cell.z + 1u);
-    let c011 = sdf_at(pair, cell.x, cell.y + 1u, cell.z + 1u);
-    let c111 = sdf_at(pair, cell.x + 1u, cell.y + 1u, cell.z + 1u);
-    let x00 = c000 + (c100 - c000) * f.x;
-    let x10 = c010 + (c110 - c010) * f.x;
-    let x01 = c001 + (c101 - c001) * f.x;
-    let x11 = c011 + (c111 - c011) * f.x;
-    let y0 = x00 + (x10 - x00) * f.y;
-    let y1 = x01 + (x11 - x01) * f.y;
-    let d = y0 + (y1 - y0) * f.z;
-    let ya = (c100 - c000) + ((c110 - c010) - (c100 - c000)) * f.y;
-    let yb = (c101 - c001) + ((c111 - c011) - (c101 - c001)) * f.y;
-    let dx = ya + (yb - ya) * f.z;
-    let dy = (x10 - x00) + ((x11 - x01) - (x10 - x00)) * f.z;
-    let dz = y1 - y0;
-    let out = p - q;
-    let out_len = length(out);
-    if (out_len > 0.0) {
-        return Sample(d + out_len, out / out_len);
-    }
-    return Sample(d, vec3<f32>(dx, dy, dz) / h);
-}
-
 struct Candidate {
     x: vec3<f32>,
     s: Sample,
@@ -151,7 +96,7 @@ fn minimise_on_triangle(pair: Pair, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>, it
     return Candidate(x, s);
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(64)
 fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
     let job_index = wid.x;
     let world = wid.y + params.world_offset;
@@ -211,18 +156,18 @@ fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wi
     // Write this job's patches in world coordinates (reduce_batch ended with a barrier after its last
     // patch write).
     let out_base = (world * params.job_count + job_index) * MAX_PATCHES;
-    if (lid < pc) {
+    for (var p = lid; p < pc; p += WG) {
         var o: PatchOut;
-        o.normal = vec4<f32>(quat_rotate(world_b.q, patch_n[lid].xyz), f32(atomicLoad(&patch_area[lid])) * pair.area_unit);
+        o.normal = vec4<f32>(quat_rotate(world_b.q, patch_n[p].xyz), f32(atomicLoad(&patch_area[p])) * pair.area_unit);
         for (var s = 0u; s < 4u; s++) {
-            let sl = patch_slot[lid * 4u + s];
+            let sl = patch_slot[p * 4u + s];
             if (sl.w < VALID_BELOW) {
                 o.slots[s] = vec4<f32>(xf_point(world_b, sl.xyz), sl.w);
             } else {
                 o.slots[s] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
             }
         }
-        job_patches[out_base + lid] = o;
+        job_patches[out_base + p] = o;
     }
     if (lid == 0u) {
         job_patch_count[world * params.job_count + job_index] = pc;

@@ -19,6 +19,7 @@
 pub mod generate;
 pub mod merge;
 pub mod model;
+pub mod normals;
 pub mod pipeline;
 pub mod reduce;
 pub mod roles;
@@ -96,6 +97,9 @@ pub struct Contact {
     pub point: Vec3,
     /// Signed distance to shape b [m]; negative when penetrating.
     pub depth: f32,
+    /// Outward normal of shape b at the contact, world frame (the patch's `normal` is shared by its
+    /// contacts; this one is local, so curved surfaces keep their exact normal).
+    pub normal: Vec3,
 }
 
 /// A patch: contacts that share a normal.

@@ -18,6 +18,8 @@ pub enum SdfShape {
     Grid(Arc<SdfGrid>),
     /// The half-space z <= 0 of the shape frame (a table or ground plane; normal +z).
     Plane,
+    /// The analytic SDF of a threaded bolt (procedural parts; exact where a grid is not).
+    Thread(crate::sdf::thread::ThreadSdf),
 }
 
 /// The shape whose triangles are queried: triangles in the shape frame [m] plus a radius [m].
@@ -86,7 +88,7 @@ pub struct PairGpu {
     pub body_b: u32,
     pub tri_first: u32,
     pub tri_count: u32,
-    /// 0: grid, 1: half-space z <= 0.
+    /// 0: grid, 1: half-space z <= 0, 2: analytic threaded bolt (params at word sdf_dims.w).
     pub sdf_kind: u32,
     pub job_first: u32,
     pub job_count: u32,
@@ -203,6 +205,12 @@ impl ContactModel {
             let tri_count = p.query.triangles.len() as u32;
             let (sdf_kind, sdf_origin, sdf_dims, sdf_scale) = match &p.sdf {
                 SdfShape::Plane => (1u32, [0.0; 4], [2, 2, 2, 0], 0.0),
+                // Exact field: no interpolation slack (sdf_origin.w = 0); parameters as words in sdf_values.
+                SdfShape::Thread(t) => {
+                    let base = flat.sdf_values.len() as u32;
+                    flat.sdf_values.extend_from_slice(&t.to_words());
+                    (2u32, [0.0; 4], [2, 2, 2, base], 0.0)
+                }
                 SdfShape::Grid(g) => {
                     let key = Arc::as_ptr(g);
                     let scale = sdf_quantum(g.spacing);

@@ -4,6 +4,7 @@
 use super::generate::{generate_job_cpu, params, GenerateKernel, Xf};
 use super::merge::{merge_cpu, MergeKernel};
 use super::model::{auto_chunk, ContactModel, FlatModel, PatchGpu};
+use super::normals::{contact_normal_cpu, NormalsKernel};
 use super::{Contact, ContactConfig, Patch};
 use crate::error::{EngineError, Result};
 use crate::gpu::GpuContext;
@@ -43,16 +44,18 @@ impl ContactsHost {
 }
 
 /// Converts kernel output into host patches.
-pub fn to_patches(raw: &[PatchGpu]) -> Vec<Patch> {
+pub fn to_patches(raw: &[PatchGpu], normals: impl Fn(usize, usize) -> Vec3) -> Vec<Patch> {
     raw.iter()
-        .map(|p| Patch {
+        .enumerate()
+        .map(|(i, p)| Patch {
             normal: Vec3::new(p.normal[0], p.normal[1], p.normal[2]),
             area: p.normal[3],
             contacts: p
                 .slots
                 .iter()
-                .filter(|s| s[3] < 1e38)
-                .map(|s| Contact { point: Vec3::new(s[0], s[1], s[2]), depth: s[3] })
+                .enumerate()
+                .filter(|(_, s)| s[3] < 1e38)
+                .map(|(k, s)| Contact { point: Vec3::new(s[0], s[1], s[2]), depth: s[3], normal: normals(i, k) })
                 .collect(),
         })
         .collect()
@@ -77,6 +80,11 @@ pub struct ContactPipeline {
     pub patches: wgpu::Buffer,
     /// Patches in use per pair and world, shape [world_count * pair_count].
     pub patch_counts: wgpu::Buffer,
+    /// Outward normal of the SDF shape at each reduced contact (xyz, w unused), world frame,
+    /// shape [world_count * pair_count * max_patches * 4].
+    pub contact_normals: wgpu::Buffer,
+    normals: NormalsKernel,
+    normals_groups: [wgpu::BindGroup; 3],
     gen_groups: [wgpu::BindGroup; 3],
     merge_groups: [wgpu::BindGroup; 3],
 }
@@ -158,6 +166,11 @@ impl ContactPipeline {
         let patch_counts = gpu.storage_buffer_zeroed("patch_counts", 4 * (world_count * pair_count) as u64);
         let generate = GenerateKernel::new(dev, cfg);
         let merge = MergeKernel::new(dev, cfg);
+        let normals = NormalsKernel::new(dev, cfg);
+        let contact_normals = gpu.storage_buffer_zeroed(
+            "contact_normals",
+            world_count as u64 * pair_count as u64 * cfg.max_patches as u64 * 4 * 16,
+        );
         let group = |pipeline: &wgpu::ComputePipeline, index: u32, buffers: &[&wgpu::Buffer]| {
             dev.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: None,
@@ -181,6 +194,12 @@ impl ContactPipeline {
             group(mp, 1, &[&job_patches, &job_patch_count]),
             group(mp, 2, &[&patches, &patch_counts]),
         ];
+        let np = &normals.pipeline;
+        let normals_groups = [
+            group(np, 0, &[&uniform, &pairs, &sdf_values]),
+            group(np, 1, &[&body_q, &patches, &patch_counts]),
+            group(np, 2, &[&contact_normals]),
+        ];
         Ok(ContactPipeline {
             cfg: cfg.clone(),
             flat,
@@ -196,6 +215,9 @@ impl ContactPipeline {
             patch_counts,
             gen_groups,
             merge_groups,
+            contact_normals,
+            normals,
+            normals_groups,
         })
     }
 
@@ -214,6 +236,14 @@ impl ContactPipeline {
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("contacts"), timestamp_writes: None });
         self.generate.dispatch(&mut pass, refs(&self.gen_groups), self.flat.jobs.len() as u32, self.world_count);
         self.merge.dispatch(&mut pass, refs(&self.merge_groups), self.flat.pairs.len() as u32, self.world_count);
+        let pair_count = self.flat.pairs.len() as u32;
+        self.normals.dispatch(
+            &mut pass,
+            refs(&self.normals_groups),
+            self.cfg.max_patches,
+            pair_count,
+            self.world_count,
+        );
     }
 
     /// Encodes and submits one frame.
@@ -228,10 +258,18 @@ impl ContactPipeline {
         let raw: Vec<PatchGpu> = gpu.read_buffer(&self.patches);
         let counts: Vec<u32> = gpu.read_buffer(&self.patch_counts);
         let candidates: Vec<u32> = gpu.read_buffer(&self.pair_candidates);
+        let normals: Vec<[f32; 4]> = gpu.read_buffer(&self.contact_normals);
         let m = self.cfg.max_patches as usize;
         let n = (self.world_count as usize) * self.flat.pairs.len();
         ContactsHost {
-            patches: (0..n).map(|i| to_patches(&raw[i * m..i * m + counts[i] as usize])).collect(),
+            patches: (0..n)
+                .map(|i| {
+                    to_patches(&raw[i * m..i * m + counts[i] as usize], |p, k| {
+                        let v = normals[(i * m + p) * 4 + k];
+                        Vec3::new(v[0], v[1], v[2])
+                    })
+                })
+                .collect(),
             candidates: candidates[..n].to_vec(),
         }
     }
@@ -263,7 +301,10 @@ pub fn contacts_cpu(
                 .map(|job| generate_job_cpu(flat, job, &xf, body_count, world, cfg))
                 .collect();
             let slices: Vec<&[PatchGpu]> = outs.iter().map(|o| o.patches.as_slice()).collect();
-            (to_patches(&merge_cpu(p, &slices, cfg)), outs.iter().map(|o| o.candidates).sum())
+            let merged = merge_cpu(p, &slices, cfg);
+            let patches =
+                to_patches(&merged, |i, k| contact_normal_cpu(flat, pair, &merged[i], k, &xf, body_count, world));
+            (patches, outs.iter().map(|o| o.candidates).sum())
         })
         .collect();
     let (patches, candidates) = results.into_iter().unzip();

@@ -3,6 +3,7 @@
 
 use super::generate::{shader_source, GENERATE_WGSL};
 use super::merge::MERGE_WGSL;
+use super::normals::NORMALS_WGSL;
 
 fn validate(src: &str) -> Result<(), String> {
     let module = naga::front::wgsl::parse_str(src).map_err(|e| e.emit_to_string(src))?;
@@ -15,7 +16,7 @@ fn validate(src: &str) -> Result<(), String> {
 #[test]
 fn contact_shaders_validate_with_naga() {
     for max_patches in [16, 64, 256] {
-        for (name, wgsl) in [("generate", GENERATE_WGSL), ("merge", MERGE_WGSL)] {
+        for (name, wgsl) in [("generate", GENERATE_WGSL), ("merge", MERGE_WGSL), ("normals", NORMALS_WGSL)] {
             let src = shader_source(wgsl, max_patches);
             if let Err(e) = validate(&src) {
                 panic!("{name}.wgsl with max_patches = {max_patches}:\n{e}");

@@ -1,0 +1,63 @@
+// SDF sampling shared by the kernels that read an SDF shape (generate.wgsl, normals.wgsl): the host
+// concatenates it after the kernel, which must bind `sdf_values: array<u32>` (16-bit grid values packed in
+// pairs, or analytic parameters; see model.rs).
+
+struct Sample {
+    d: f32,
+    g: vec3<f32>,
+}
+
+fn sdf_at(pair: Pair, i: u32, j: u32, k: u32) -> f32 {
+    let dims = pair.sdf_dims.xyz;
+    let idx = pair.sdf_dims.w + i + dims.x * (j + dims.y * k);
+    let word = sdf_values[idx >> 1u];
+    let half = select(word << 16u, word & 0xffff0000u, (idx & 1u) == 1u);
+    return f32(bitcast<i32>(half) >> 16u) * pair.sdf_scale;
+}
+
+// Trilinear value and its exact gradient; outside the grid box the distance to the box is added.
+// Mirrors SdfGrid::sample (kind 0), the half-space z < 0 of the shape frame (kind 1) and the analytic
+// threaded bolt (kind 2, thread.wgsl).
+fn sdf_sample(pair: Pair, p: vec3<f32>) -> Sample {
+    if (pair.sdf_kind == 1u) {
+        return Sample(p.z, vec3<f32>(0.0, 0.0, 1.0));
+    }
+    if (pair.sdf_kind == 2u) {
+        return thread_sample(pair.sdf_dims.w, p);
+    }
+    let lo = pair.sdf_origin.xyz;
+    let h = pair.sdf_origin.w;
+    let dims = pair.sdf_dims.xyz;
+    let hi = lo + h * vec3<f32>(dims - vec3<u32>(1u));
+    let q = clamp(p, lo, hi);
+    let g = (q - lo) / h;
+    let cell = min(vec3<u32>(floor(g)), dims - vec3<u32>(2u));
+    let f = g - vec3<f32>(cell);
+    let c000 = sdf_at(pair, cell.x, cell.y, cell.z);
+    let c100 = sdf_at(pair, cell.x + 1u, cell.y, cell.z);
+    let c010 = sdf_at(pair, cell.x, cell.y + 1u, cell.z);
+    let c110 = sdf_at(pair, cell.x + 1u, cell.y + 1u, cell.z);
+    let c001 = sdf_at(pair, cell.x, cell.y, cell.z + 1u);
+    let c101 = sdf_at(pair, cell.x + 1u, cell.y, cell.z + 1u);
+    let c011 = sdf_at(pair, cell.x, cell.y + 1u, cell.z + 1u);
+    let c111 = sdf_at(pair, cell.x + 1u, cell.y + 1u, cell.z + 1u);
+    let x00 = c000 + (c100 - c000) * f.x;
+    let x10 = c010 + (c110 - c010) * f.x;
+    let x01 = c001 + (c101 - c001) * f.x;
+    let x11 = c011 + (c111 - c011) * f.x;
+    let y0 = x00 + (x10 - x00) * f.y;
+    let y1 = x01 + (x11 - x01) * f.y;
+    let d = y0 + (y1 - y0) * f.z;
+    let ya = (c100 - c000) + ((c110 - c010) - (c100 - c000)) * f.y;
+    let yb = (c101 - c001) + ((c111 - c011) - (c101 - c001)) * f.y;
+    let dx = ya + (yb - ya) * f.z;
+    let dy = (x10 - x00) + ((x11 - x01) - (x10 - x00)) * f.z;
+    let dz = y1 - y0;
+    let out = p - q;
+    let out_len = length(out);
+    if (out_len > 0.0) {
+        return Sample(d + out_len, out / out_len);
+    }
+    return Sample(d, vec3<f32>(dx, dy, dz) / h);
+}
+

@@ -1,0 +1,127 @@
+// Analytic SDF of a threaded bolt (sdf_kind 2): WGSL twin of engine/src/sdf/thread.rs, which documents the
+// method. Parameters are 12 f32 words in `sdf_values` starting at `base` (ThreadSdf::to_words).
+
+const SQRT3_T: f32 = 1.7320508;
+
+fn tw(base: u32, i: u32) -> f32 {
+    return bitcast<f32>(sdf_values[base + i]);
+}
+
+struct Closest {
+    c: vec2<f32>,
+    interior: bool,
+}
+
+fn seg_closest(x: vec2<f32>, a: vec2<f32>, b: vec2<f32>) -> Closest {
+    let ab = b - a;
+    let t = clamp(dot(x - a, ab) / dot(ab, ab), 0.0, 1.0);
+    return Closest(a + ab * t, t > 0.0 && t < 1.0);
+}
+
+struct Sample2 {
+    d: f32,
+    g: vec2<f32>,
+}
+
+fn signed_from_closest(x: vec2<f32>, c: Closest, inside: bool, normal: vec2<f32>) -> Sample2 {
+    let d = x - c.c;
+    let len = length(d);
+    let sgn = select(1.0, -1.0, inside);
+    if (c.interior || len <= 1.0e-12) {
+        return Sample2(sgn * len, normal);
+    }
+    return Sample2(sgn * len, d * (sgn / len));
+}
+
+fn hex_prism_sample(apothem: f32, z0: f32, z1: f32, p: vec3<f32>) -> Sample {
+    let q = vec2<f32>(abs(p.x), abs(p.y));
+    let a = apothem;
+    let corner = vec2<f32>(a, a / SQRT3_T);
+    let top = vec2<f32>(0.0, 2.0 * a / SQRT3_T);
+    let n1 = vec2<f32>(0.5, 0.5 * SQRT3_T);
+    let c1 = seg_closest(q, vec2<f32>(a, 0.0), corner);
+    let c2 = seg_closest(q, corner, top);
+    let inside = q.x <= a && dot(q, n1) <= a;
+    var c = c2;
+    var fallback = n1;
+    let e1 = q - c1.c;
+    let e2 = q - c2.c;
+    if (dot(e1, e1) <= dot(e2, e2)) {
+        c = c1;
+        fallback = vec2<f32>(1.0, 0.0);
+    }
+    let s2 = signed_from_closest(q, c, inside, fallback);
+    let g2 = vec2<f32>(select(s2.g.x, -s2.g.x, p.x < 0.0), select(s2.g.y, -s2.g.y, p.y < 0.0));
+    let zc = 0.5 * (z0 + z1);
+    let dz = abs(p.z - zc) - 0.5 * (z1 - z0);
+    let sz = select(1.0, -1.0, p.z < zc);
+    let d2 = s2.d;
+    if (d2 > 0.0 && dz > 0.0) {
+        let len = sqrt(d2 * d2 + dz * dz);
+        return Sample(len, vec3<f32>(g2.x * d2 / len, g2.y * d2 / len, sz * dz / len));
+    } else if (d2 > dz) {
+        return Sample(d2, vec3<f32>(g2.x, g2.y, 0.0));
+    }
+    return Sample(dz, vec3<f32>(0.0, 0.0, sz));
+}
+
+fn thread_sample(base: u32, p: vec3<f32>) -> Sample {
+    let pitch = tw(base, 0u);
+    let phase = tw(base, 1u);
+    let pitch_radius = tw(base, 2u);
+    let min_radius = tw(base, 3u);
+    let max_radius = tw(base, 4u);
+    let rho = max(sqrt(p.x * p.x + p.y * p.y), 1.0e-9);
+    let radial = vec3<f32>(p.x / rho, p.y / rho, 0.0);
+    let theta = atan2(p.y, p.x);
+    let lead = pitch / 6.2831855;
+    let u = p.z - phase - lead * theta;
+    let w = u - pitch * round(u / pitch);
+    let s = abs(w);
+    let a = max(0.25 * pitch - (max_radius - pitch_radius) / SQRT3_T, 0.0);
+    let b = min(0.25 * pitch + (pitch_radius - min_radius) / SQRT3_T, 0.5 * pitch);
+    let x = vec2<f32>(s, rho);
+    let pa = vec2<f32>(0.0, max_radius);
+    let pb = vec2<f32>(a, max_radius);
+    let pc = vec2<f32>(b, min_radius);
+    let pd = vec2<f32>(0.5 * pitch, min_radius);
+    let c1 = seg_closest(x, pa, pb);
+    let c2 = seg_closest(x, pb, pc);
+    let c3 = seg_closest(x, pc, pd);
+    let d1 = dot(x - c1.c, x - c1.c);
+    let d2 = dot(x - c2.c, x - c2.c);
+    let d3 = dot(x - c3.c, x - c3.c);
+    let flank_n = normalize(vec2<f32>(max_radius - min_radius, b - a));
+    var c = c1;
+    var fallback = vec2<f32>(0.0, 1.0);
+    if (d2 < d1 && d2 <= d3) {
+        c = c2;
+        fallback = flank_n;
+    } else if (d3 < d1 && d3 < d2) {
+        c = c3;
+    }
+    let r_at = clamp(pitch_radius + SQRT3_T * (0.25 * pitch - s), min_radius, max_radius);
+    let s2 = signed_from_closest(x, c, rho < r_at, fallback);
+    let sign_w = select(1.0, -1.0, w < 0.0);
+    let tangential = vec3<f32>(-radial.y, radial.x, 0.0);
+    var d = s2.d;
+    var g = radial * s2.g.y + (vec3<f32>(0.0, 0.0, 1.0) - tangential * (lead / rho)) * (s2.g.x * sign_w);
+    let below = tw(base, 5u) - p.z;
+    if (below > d) {
+        d = below;
+        g = vec3<f32>(0.0, 0.0, -1.0);
+    }
+    let above = p.z - tw(base, 6u);
+    if (above > d) {
+        d = above;
+        g = vec3<f32>(0.0, 0.0, 1.0);
+    }
+    if (tw(base, 7u) != 0.0) {
+        let h = hex_prism_sample(tw(base, 8u), tw(base, 9u), tw(base, 10u), p);
+        if (h.d < d) {
+            d = h.d;
+            g = h.g;
+        }
+    }
+    return Sample(d, g);
+}
