@@ -5,7 +5,13 @@
 // (deepest, farthest from it, farthest from their line, farthest on the other side: the largest area).
 // Candidates are never written to global memory.
 
-const WG: u32 = 256u;
+// Workgroup size = candidates per batch (BATCH in reduce.rs must match). 64 rather than 256: lavapipe runs
+// a workgroup as WG/8 coroutines, and each region between barriers of the reduction costs per coroutine far
+// more than its arithmetic, so the reduction got ~2x cheaper per candidate (factory-bench contacts, M16
+// nut-bolt, 1 world: GPU / CPU-twin time 1.5 -> 0.85). On a GPU 64 is two warps or one wave64, so barriers
+// stay cheap, and the patch list (~6 KiB at 64 patches) per 64 invocations still lets several workgroups
+// share an SM. Smaller batches mean more sequential new-patch rounds per job; 32 would double them again.
+const WG: u32 = 64u;
 // Patch budget per pair, substituted by the host when the pipeline is built (16..256).
 const MAX_PATCHES: u32 = MAX_PATCHES_VALUE;
 const PATCH_CAP: u32 = MAX_PATCHES_VALUE + 1u; // + one temporary patch for AddPatch when full
@@ -98,10 +104,10 @@ var<workgroup> wg_u32: u32;
 var<workgroup> patch_count: u32;
 
 fn reset_patches(lid: u32) {
-    if (lid < PATCH_CAP) {
-        atomicStore(&patch_area[lid], 0u);
+    for (var p = lid; p < PATCH_CAP; p += WG) {
+        atomicStore(&patch_area[p], 0u);
         for (var s = 0u; s < 4u; s++) {
-            patch_slot[lid * 4u + s] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
+            patch_slot[p * 4u + s] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
         }
     }
     if (lid == 0u) {
@@ -154,7 +160,7 @@ const ASSIGNED_ONLY: u32 = 0x200u;
 // (workgroup-uniform; the caller keeps it) and the count after it is returned. Every invocation must call
 // it, after writing its cand_pd / cand_n slot.
 //
-// Barriers are the cost on lavapipe (it runs a workgroup as 32 8-wide coroutines, resumed once per barrier
+// Barriers cost on lavapipe (it runs a workgroup as WG/8 8-wide coroutines, resumed once per barrier
 // region) and they serialise warps on a GPU, so each step is placed to need as few as possible:
 // - the seed's normal is read from cand_n (stable during the batch), so binning needs no barrier after
 //   AddPatch writes the patch; a fresh patch index's area is still 0 from reset_patches (the temporary
@@ -266,8 +272,8 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
     }
     // Slots: 4 rounds, each an atomic arg-max per patch over the current slot and this batch's members.
     // The patches written above are visible: the last workgroupUniformLoad of the loop was a barrier.
-    if (lid < pc) {
-        atomicStore(&patch_key[lid], slot_key(0u, lid, min_sep));
+    for (var p = lid; p < pc; p += WG) {
+        atomicStore(&patch_key[p], slot_key(0u, p, min_sep));
     }
     for (var k = 0u; k < 4u; k++) {
         workgroupBarrier();
@@ -278,13 +284,13 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
             }
         }
         workgroupBarrier();
-        if (lid < pc) {
-            let code = atomicLoad(&patch_key[lid]) & IDX_MASK;
+        for (var p = lid; p < pc; p += WG) {
+            let code = atomicLoad(&patch_key[p]) & IDX_MASK;
             if (code != 0u) {
-                patch_slot[lid * 4u + k] = cand_pd[code - 1u];
+                patch_slot[p * 4u + k] = cand_pd[code - 1u];
             }
             if (k < 3u) {
-                atomicStore(&patch_key[lid], slot_key(k + 1u, lid, min_sep));
+                atomicStore(&patch_key[p], slot_key(k + 1u, p, min_sep));
             }
         }
     }

@@ -9,7 +9,7 @@
 @group(2) @binding(0) var<storage, read_write> patches: array<PatchOut>;
 @group(2) @binding(1) var<storage, read_write> patch_counts: array<u32>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(64)
 fn merge(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
     let pair_index = wid.x;
     let world = wid.y + params.world_offset;
@@ -67,13 +67,13 @@ fn merge(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: 
         pc = reduce_batch(lid, pc, params.normal_cos, pair.contact_offset, pair.min_separation);
     }
     let out_base = (world * params.pair_count + pair_index) * MAX_PATCHES;
-    if (lid < pc) {
+    for (var p = lid; p < pc; p += WG) {
         var o: PatchOut;
-        o.normal = vec4<f32>(patch_n[lid].xyz, f32(atomicLoad(&patch_area[lid])) * pair.area_unit);
+        o.normal = vec4<f32>(patch_n[p].xyz, f32(atomicLoad(&patch_area[p])) * pair.area_unit);
         for (var s = 0u; s < 4u; s++) {
-            o.slots[s] = patch_slot[lid * 4u + s];
+            o.slots[s] = patch_slot[p * 4u + s];
         }
-        patches[out_base + lid] = o;
+        patches[out_base + p] = o;
     }
     if (lid == 0u) {
         patch_counts[world * params.pair_count + pair_index] = pc;
