@@ -5,13 +5,11 @@
 // (deepest, farthest from it, farthest from their line, farthest on the other side: the largest area).
 // Candidates are never written to global memory.
 
-// Workgroup size = candidates per batch (BATCH in reduce.rs must match). 64 rather than 256: lavapipe runs
-// a workgroup as WG/8 coroutines, and each region between barriers of the reduction costs per coroutine far
-// more than its arithmetic, so the reduction got ~2x cheaper per candidate (factory-bench contacts, M16
-// nut-bolt, 1 world: GPU / CPU-twin time 1.5 -> 0.85). On a GPU 64 is two warps or one wave64, so barriers
-// stay cheap, and the patch list (~6 KiB at 64 patches) per 64 invocations still lets several workgroups
-// share an SM. Smaller batches mean more sequential new-patch rounds per job; 32 would double them again.
-const WG: u32 = 64u;
+// Workgroup size = candidates per batch (BATCH in reduce.rs must match). 64 made the kernels ~1.7x faster
+// on lavapipe (M16 nut-bolt, 1 world: GPU / CPU-twin time 1.5 -> 0.85) but lost ~90% of the candidates
+// of jobs with ~180 batches (48+ worlds, one 11.5k-triangle job per pair) on lavapipe; back to 256 until
+// that is understood (see the commit that reverted it).
+const WG: u32 = 256u;
 // Patch budget per pair, substituted by the host when the pipeline is built (16..256).
 const MAX_PATCHES: u32 = MAX_PATCHES_VALUE;
 const PATCH_CAP: u32 = MAX_PATCHES_VALUE + 1u; // + one temporary patch for AddPatch when full

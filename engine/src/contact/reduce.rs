@@ -6,7 +6,7 @@ use super::model::{PatchGpu, EMPTY_DEPTH};
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
 /// Candidates per batch: the workgroup size of the kernels (`WG` in common.wgsl; see the note there).
-pub const BATCH: usize = 64;
+pub const BATCH: usize = 256;
 const VALID_BELOW: f32 = 1.0e38;
 const NEG_INF: f32 = -3.0e38;
 const IDX_MASK: u32 = 0x3ff;
