@@ -13,4 +13,5 @@ pub mod contact;
 pub mod fsutil;
 pub mod gpu;
 pub mod sdf;
+pub mod solver;
 pub mod urdf;
