@@ -10,6 +10,7 @@ frames() { case $1 in 1) echo 20;; 64) echo 3;; *) echo 1;; esac; }
 for w in 1 64 1024; do
   cpu=""; [ "$w" != 1024 ] && cpu="--cpu"
   "$bin" contacts --pair nut-bolt --size M16 --fit tight --worlds $w --frames $(frames $w) $cpu --json >> "$out"
+  "$bin" contacts --pair nut-bolt --size M16 --fit tight --sdf analytic --worlds $w --frames $(frames $w) $cpu --json >> "$out"
   "$bin" contacts --mesh-a "$mesh/factory_nut_m16_tight_subdiv_3x.obj" --mesh-b "$mesh/factory_bolt_m16_tight.obj" \
     --pitch-mm 2 --worlds $w --frames $(frames $w) $cpu --json >> "$out"
   "$bin" contacts --pair peg-hole --size 4 --fit tight --worlds $w --frames $(frames $w) $cpu --json >> "$out"

@@ -9,6 +9,8 @@ for r in rows:
     name = r["pair"]
     if "/" in name:
         name = "Factory's " + ("M16 tight nut-bolt" if "bolt" in name else "4 mm tight peg-hole") + " meshes"
+    if r.get("sdf") == "analytic":
+        name += " (analytic bolt SDF)"
     cpu = r.get("cpu_twin_ms_per_frame")
     ratio = f"{r['handling_ms_per_frame'] / cpu:.2f}" if cpu else "-"
     cpu_s = f"{cpu:.1f}" if cpu else "-"

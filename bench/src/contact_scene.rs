@@ -78,6 +78,7 @@ impl ContactScene {
                 b_pose: (Vec3::ZERO, Quat::IDENTITY),
                 sdf: shape,
                 contact_offset,
+                friction: 0.0,
             }],
         };
         ContactScene {

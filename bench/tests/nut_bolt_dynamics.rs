@@ -7,6 +7,7 @@ use factory_assets::{nut_bolt, Fit, IsoSize, ThreadOptions};
 use factory_bench::contact_scene::{lower_until_touch, ContactScene, PartPair};
 use factory_engine::contact::{ContactConfig, ContactPipeline};
 use factory_engine::gpu::GpuContext;
+use factory_engine::solver::gpu::GpuSolver;
 use factory_engine::solver::{step_cpu, BodyModel, BodyState, SolverConfig};
 use glam::{Quat, Vec3};
 
@@ -27,7 +28,7 @@ struct Run {
     seconds: f64,
 }
 
-fn release_nut(mu: f32, frames: u32) -> Run {
+fn release_nut(mu: f32, frames: u32, on_gpu: bool) -> Run {
     let nb = nut_bolt(IsoSize::M16, Fit::Tight, &ThreadOptions::default()).unwrap();
     let pair = PartPair {
         name: "M16".into(),
@@ -36,7 +37,8 @@ fn release_nut(mu: f32, frames: u32) -> Run {
         pitch: nb.pitch,
         side_shift: 0.0,
     };
-    let scene = ContactScene::with_thread_sdf(pair, nb.bolt_sdf(), 1.0e-3);
+    let mut scene = ContactScene::with_thread_sdf(pair, nb.bolt_sdf(), 1.0e-3);
+    scene.model.pairs[0].friction = mu;
     let gpu = GpuContext::global().unwrap();
     let p = nb.pitch;
     let lift = lower_until_touch(gpu, &scene, 5.0 * p, 5.0 * p - 0.1e-3, 0.2e-6).unwrap();
@@ -49,12 +51,26 @@ fn release_nut(mu: f32, frames: u32) -> Run {
     let cfg = SolverConfig::default();
     let z0 = state.body_q[0].p[2];
     let (mut yaw, mut last) = (0.0f64, 0.0f64);
+    let solver = GpuSolver::new(gpu, &pipe, &model, &cfg).unwrap();
+    solver.write_state(gpu, &pipe, &state);
     for _ in 0..frames {
-        pipe.write_body_q(gpu, &state.body_q);
-        pipe.run(gpu);
-        let contacts = pipe.read(gpu);
-        let ok = step_cpu(&model, &mut state, &contacts, &pipe.flat, &[mu], &cfg);
-        assert!(ok[0], "world diverged");
+        if on_gpu {
+            // Contacts and solver in one submission; the state stays on the device (read here only to
+            // track the turns).
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            pipe.encode(&mut enc);
+            solver.encode(&mut enc);
+            gpu.queue.submit([enc.finish()]);
+            let (s, ok) = solver.read_state(gpu, &pipe);
+            assert!(ok[0], "world diverged");
+            state = s;
+        } else {
+            pipe.write_body_q(gpu, &state.body_q);
+            pipe.run(gpu);
+            let contacts = pipe.read(gpu);
+            let ok = step_cpu(&model, &mut state, &contacts, &pipe.flat, &cfg);
+            assert!(ok[0], "world diverged");
+        }
         let q = Quat::from_xyzw(state.body_q[0].q[0], state.body_q[0].q[1], state.body_q[0].q[2], state.body_q[0].q[3]);
         let (axis, angle) = q.to_axis_angle();
         let now = (angle * axis.z.signum()) as f64;
@@ -75,21 +91,28 @@ fn release_nut(mu: f32, frames: u32) -> Run {
 
 #[test]
 fn frictionless_m16_nut_descends_the_helix_at_the_analytic_rate() {
-    let r = release_nut(0.0, 60);
-    let k = std::f64::consts::TAU / r.pitch;
-    let a = G as f64 * r.mass / (r.mass + r.inertia_axis * k * k);
-    let expect = 0.5 * a * r.seconds * r.seconds;
-    let turns = r.yaw.abs() / std::f64::consts::TAU;
-    eprintln!(
-        "descent {:.4} mm (analytic {:.4} mm), turns {turns:.4}, descent per turn {:.4} mm (pitch {:.4} mm)",
-        r.descent * 1e3,
-        expect * 1e3,
-        r.descent / turns * 1e3,
-        r.pitch * 1e3
-    );
-    assert!((r.descent - expect).abs() <= DESCENT_TOL * expect, "descent {} m vs analytic {expect} m", r.descent);
-    assert!(r.yaw < 0.0, "a right-hand nut turns clockwise (seen from +z) going down: yaw {}", r.yaw);
-    assert!((r.descent / turns - r.pitch).abs() <= LEAD_TOL * r.pitch, "{} m per turn", r.descent / turns);
+    for on_gpu in [false, true] {
+        let r = release_nut(0.0, 60, on_gpu);
+        let k = std::f64::consts::TAU / r.pitch;
+        let a = G as f64 * r.mass / (r.mass + r.inertia_axis * k * k);
+        let expect = 0.5 * a * r.seconds * r.seconds;
+        let turns = r.yaw.abs() / std::f64::consts::TAU;
+        let who = if on_gpu { "GPU solver" } else { "CPU reference" };
+        eprintln!(
+            "{who}: descent {:.4} mm (analytic {:.4} mm), turns {turns:.4}, descent per turn {:.4} mm (pitch {:.4} mm)",
+            r.descent * 1e3,
+            expect * 1e3,
+            r.descent / turns * 1e3,
+            r.pitch * 1e3
+        );
+        assert!(
+            (r.descent - expect).abs() <= DESCENT_TOL * expect,
+            "{who}: descent {} m vs analytic {expect} m",
+            r.descent
+        );
+        assert!(r.yaw < 0.0, "{who}: a right-hand nut turns clockwise (seen from +z) going down: yaw {}", r.yaw);
+        assert!((r.descent / turns - r.pitch).abs() <= LEAD_TOL * r.pitch, "{who}: {} m per turn", r.descent / turns);
+    }
 }
 
 /// Self-locking (DESIGN section 6): the nut holds when mu exceeds about tan(lead angle) cos(30 deg)
@@ -98,10 +121,10 @@ const LOCKED_DRIFT: f64 = 0.01e-3;
 
 #[test]
 fn m16_nut_self_locks_above_the_critical_friction_and_turns_below() {
-    let held = release_nut(0.1, 60);
+    let held = release_nut(0.1, 60, true);
     eprintln!("mu 0.1: descent {:.5} mm", held.descent * 1e3);
     assert!(held.descent.abs() < LOCKED_DRIFT, "mu 0.1: the nut moved {} m", held.descent);
-    let free = release_nut(0.01, 60);
+    let free = release_nut(0.01, 60, true);
     eprintln!("mu 0.01: descent {:.4} mm", free.descent * 1e3);
     // Clearly turning: at least a fifth of the frictionless descent (4.6 mm) and along the thread.
     assert!(free.descent > 0.9e-3 && free.yaw < -0.4, "mu 0.01: descent {} m, yaw {}", free.descent, free.yaw);

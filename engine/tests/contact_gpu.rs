@@ -25,6 +25,7 @@ fn plane_pair(query: QueryShape, offset: f32) -> PairSpec {
         b_pose: (Vec3::ZERO, Quat::IDENTITY),
         sdf: SdfShape::Plane,
         contact_offset: offset,
+        friction: 0.0,
     }
 }
 
@@ -125,6 +126,7 @@ fn sphere_against_sdf_grid() {
         b_pose: (Vec3::ZERO, Quat::IDENTITY),
         sdf: SdfShape::Grid(grid.clone()),
         contact_offset: 0.002,
+        friction: 0.0,
     };
     let model = ContactModel { body_count: 2, pairs: vec![pair] };
     let dir = Vec3::new(1.0, 2.0, 2.0).normalize();
@@ -172,6 +174,7 @@ fn gpu_cpu_parity_on_seeded_triangles() {
         b_pose: (Vec3::ZERO, Quat::IDENTITY),
         sdf: SdfShape::Grid(grid),
         contact_offset: 0.003,
+        friction: 0.0,
     };
     let model = ContactModel { body_count: 2, pairs: vec![pair] };
     let worlds = 5;

@@ -50,6 +50,10 @@ struct Pair {
     radius: f32,
     area_unit: f32,
     min_separation: f32,
+    friction: f32,
+    _pad1: f32,
+    _pad2: f32,
+    _pad3: f32,
 }
 
 struct Transform {

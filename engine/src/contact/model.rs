@@ -70,9 +70,11 @@ pub struct PairSpec {
     pub sdf: SdfShape,
     /// Candidates farther apart than this are ignored [m].
     pub contact_offset: f32,
+    /// Coulomb friction coefficient of the pair (unitless).
+    pub friction: f32,
 }
 
-/// GPU mirror of `Pair` in common.wgsl (144 bytes).
+/// GPU mirror of `Pair` in common.wgsl (160 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable, PartialEq)]
 pub struct PairGpu {
@@ -100,6 +102,9 @@ pub struct PairGpu {
     pub area_unit: f32,
     /// Minimum distance between two contacts of a patch [m].
     pub min_separation: f32,
+    /// Coulomb friction coefficient (unitless).
+    pub friction: f32,
+    pub _pad: [f32; 3],
 }
 
 /// GPU mirror of `Job` in generate.wgsl: a run of query triangles of one pair.
@@ -181,6 +186,13 @@ impl ContactModel {
                         expected: format!("a body index below body_count = {} or NO_BODY", self.body_count),
                     });
                 }
+            }
+            if !(p.friction.is_finite() && p.friction >= 0.0) {
+                return Err(EngineError::Config {
+                    field: "friction",
+                    value: format!("{} (pair {i})", p.friction),
+                    expected: "a finite coefficient >= 0".into(),
+                });
             }
             if !(p.contact_offset.is_finite() && p.contact_offset >= 0.0) {
                 return Err(EngineError::Config {
@@ -264,6 +276,8 @@ impl ContactModel {
                 area_unit,
                 // Contacts of one patch closer than a tenth of a typical edge add nothing.
                 min_separation: 0.1 * mean_edge,
+                friction: p.friction,
+                _pad: [0.0; 3],
             });
         }
         if flat.tri_verts.is_empty() {

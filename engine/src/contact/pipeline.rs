@@ -69,6 +69,10 @@ pub struct ContactPipeline {
     pub world_count: u32,
     generate: GenerateKernel,
     merge: MergeKernel,
+    /// Shape pairs (PairGpu), shared by all worlds.
+    pub pairs: wgpu::Buffer,
+    /// SDF values and analytic parameters (see model.rs).
+    pub sdf_values: wgpu::Buffer,
     /// Body poses, shape [world_count * body_count]; written by the host or the solver.
     pub body_q: wgpu::Buffer,
     /// Per-job patches, shape [world_count * job_count * max_patches].
@@ -218,6 +222,8 @@ impl ContactPipeline {
             contact_normals,
             normals,
             normals_groups,
+            pairs,
+            sdf_values,
         })
     }
 

@@ -235,6 +235,7 @@ fn primitive_sdf(g: &ShapeGeometry, cache: &SdfCache) -> Result<SdfShape> {
 /// Errors ([`EngineError::Config`]): two planes, a negative or non-finite offset, non-positive sizes, an
 /// empty mesh, an untagged mesh without a solid hull where its hull must be baked; bake errors from the
 /// cache (a resolution out of range, a grid over the memory limit).
+/// The pair's friction starts at 0; set `PairSpec::friction` on the result.
 pub fn pair_spec(a: &ShapeDesc, b: &ShapeDesc, contact_offset: f32, cache: &SdfCache) -> Result<PairSpec> {
     if !(contact_offset.is_finite() && contact_offset >= 0.0) {
         return Err(bad("contact_offset", contact_offset.to_string(), "a finite distance >= 0 [m]"));
@@ -302,6 +303,7 @@ pub fn pair_spec(a: &ShapeDesc, b: &ShapeDesc, contact_offset: f32, cache: &SdfC
         b_pose: ss.pose,
         sdf: field,
         contact_offset,
+        friction: 0.0,
     })
 }
 

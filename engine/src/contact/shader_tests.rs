@@ -16,7 +16,12 @@ fn validate(src: &str) -> Result<(), String> {
 #[test]
 fn contact_shaders_validate_with_naga() {
     for max_patches in [16, 64, 256] {
-        for (name, wgsl) in [("generate", GENERATE_WGSL), ("merge", MERGE_WGSL), ("normals", NORMALS_WGSL)] {
+        for (name, wgsl) in [
+            ("generate", GENERATE_WGSL),
+            ("merge", MERGE_WGSL),
+            ("normals", NORMALS_WGSL),
+            ("solver", crate::solver::gpu::SOLVER_WGSL),
+        ] {
             let src = shader_source(wgsl, max_patches);
             if let Err(e) = validate(&src) {
                 panic!("{name}.wgsl with max_patches = {max_patches}:\n{e}");

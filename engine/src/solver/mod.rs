@@ -19,6 +19,8 @@
 //! Friction: Coulomb per contact, the two tangential impulses clamped to mu times the normal impulse.
 //! Accumulated impulses are clamped (Catto 2005, "Iterative dynamics with temporal coherence").
 
+pub mod gpu;
+
 use crate::contact::generate::{sdf_sample_cpu, Xf};
 use crate::contact::model::{FlatModel, NO_BODY};
 use crate::contact::{ContactsHost, TransformGpu};
@@ -119,15 +121,14 @@ fn xf(t: &TransformGpu) -> (Vec3, Quat) {
 }
 
 /// Advances every world by one frame of `cfg.dt` with the contacts generated at the frame's start.
-/// `flat` is the contact model the contacts came from (its pairs give the bodies, shape poses and SDFs;
-/// `NO_BODY` = the static world) and `pair_friction[p]` is pair p's friction coefficient. Returns, per world, whether it stayed finite and below
+/// `flat` is the contact model the contacts came from (its pairs give the bodies, shape poses, SDFs and
+/// friction coefficients; `NO_BODY` = the static world). Returns, per world, whether it stayed finite and below
 /// `max_speed` (a diverged world is left as is, for the caller to reset; other worlds are unaffected).
 pub fn step_cpu(
     model: &BodyModel,
     state: &mut BodyState,
     contacts: &ContactsHost,
     flat: &FlatModel,
-    pair_friction: &[f32],
     cfg: &SolverConfig,
 ) -> Vec<bool> {
     let nb = model.body_count();
@@ -164,8 +165,8 @@ pub fn step_cpu(
                         a,
                         b,
                         pair: p,
-                        anchor_a: qa.inverse() * (c.point + flat.pairs[p].radius * c.normal - pa),
-                        mu: pair_friction[p],
+                        anchor_a: qa.inverse() * (c.point + flat.pairs[p].radius * patch.normal - pa),
+                        mu: flat.pairs[p].friction,
                         lambda_n: 0.0,
                         lambda_t: [0.0; 2],
                     });

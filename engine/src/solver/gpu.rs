@@ -1,0 +1,225 @@
+//! The rigid-body step on the GPU (solver.wgsl): pipeline, buffers and dispatch. Its CPU reference is
+//! [`super::step_cpu`]; `engine/tests/solver_gpu.rs` checks parity and bitwise determinism.
+
+use super::{BodyModel, BodyState, SolverConfig};
+use crate::contact::generate::{compute_pipeline, shader_source};
+use crate::contact::ContactPipeline;
+use crate::error::{EngineError, Result};
+use crate::gpu::GpuContext;
+use bytemuck::{Pod, Zeroable};
+
+pub(crate) const SOLVER_WGSL: &str = concat!(
+    include_str!("solver.wgsl"),
+    include_str!("../contact/sdf_sample.wgsl"),
+    include_str!("../sdf/thread.wgsl")
+);
+
+/// Invocations (worlds) per workgroup.
+pub const SOLVER_WG: u32 = 64;
+
+/// GPU mirror of `SolverParams` in solver.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct SolverParamsGpu {
+    pub world_count: u32,
+    pub body_count: u32,
+    pub pair_count: u32,
+    pub max_rows: u32,
+    pub dt: f32,
+    pub substeps: u32,
+    pub pos_iters: u32,
+    pub vel_iters: u32,
+    pub max_depenetration_velocity: f32,
+    pub rest_offset: f32,
+    pub max_speed: f32,
+    pub _pad: u32,
+    pub gravity: [f32; 4],
+}
+
+/// GPU mirror of `Body` in solver.wgsl: inverse inertia columns (16-byte aligned) and COM + inverse mass.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct BodyGpu {
+    pub inv_inertia: [[f32; 4]; 3],
+    pub com_inv_mass: [f32; 4],
+}
+
+impl SolverConfig {
+    /// Refuses non-physical settings, naming the field.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |field: &'static str, value: String, expected: &str| {
+            Err(EngineError::Config { field, value, expected: expected.into() })
+        };
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return bad("dt", self.dt.to_string(), "a time step > 0 [s]");
+        }
+        if self.substeps == 0 {
+            return bad("substeps", "0".into(), "at least 1");
+        }
+        if self.pos_iters == 0 {
+            return bad("pos_iters", "0".into(), "at least 1");
+        }
+        if !(self.max_depenetration_velocity.is_finite() && self.max_depenetration_velocity >= 0.0) {
+            return bad(
+                "max_depenetration_velocity",
+                self.max_depenetration_velocity.to_string(),
+                "a speed >= 0 [m/s]",
+            );
+        }
+        if !(self.max_speed.is_finite() && self.max_speed > 0.0) {
+            return bad("max_speed", self.max_speed.to_string(), "a speed > 0 [m/s]");
+        }
+        Ok(())
+    }
+}
+
+impl BodyModel {
+    /// Refuses zero, negative or non-finite masses and inertias, naming the body.
+    pub fn validate(&self) -> Result<()> {
+        for (i, &m) in self.body_inv_mass.iter().enumerate() {
+            let inertia_ok = self.body_inv_inertia[i].to_cols_array().iter().all(|v| v.is_finite());
+            if !(m.is_finite() && m >= 0.0) || !inertia_ok {
+                return Err(EngineError::Config {
+                    field: "body mass",
+                    value: format!("body {i}: inverse mass {m}"),
+                    expected: "a finite mass > 0 [kg] (or a static body) and a finite, invertible inertia".into(),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// GPU solver state for one contact pipeline: body velocities, per-world scratch, pipeline.
+pub struct GpuSolver {
+    pub cfg: SolverConfig,
+    /// Body velocities (linear, angular) [m/s, rad/s], shape [world_count * body_count * 2] vec4.
+    pub body_qd: wgpu::Buffer,
+    /// [world_count] status vec4 (x: 1 ok, 0 diverged; y: rows used), then the rows.
+    pub scratch: wgpu::Buffer,
+    pipeline: wgpu::ComputePipeline,
+    groups: [wgpu::BindGroup; 3],
+    world_count: u32,
+}
+
+impl GpuSolver {
+    /// Builds the solver over `contacts` (which owns body_q, the patches, pairs and SDF values).
+    pub fn new(gpu: &GpuContext, contacts: &ContactPipeline, model: &BodyModel, cfg: &SolverConfig) -> Result<Self> {
+        cfg.validate()?;
+        model.validate()?;
+        if model.body_count() as u32 != contacts.body_count {
+            return Err(EngineError::Config {
+                field: "body_count",
+                value: model.body_count().to_string(),
+                expected: format!("the contact model's {} bodies", contacts.body_count),
+            });
+        }
+        let world_count = contacts.world_count;
+        let pair_count = contacts.flat.pairs.len() as u32;
+        let max_rows = (pair_count * contacts.cfg.max_patches * 4).max(1);
+        let params = SolverParamsGpu {
+            world_count,
+            body_count: contacts.body_count,
+            pair_count,
+            max_rows,
+            dt: cfg.dt,
+            substeps: cfg.substeps,
+            pos_iters: cfg.pos_iters,
+            vel_iters: cfg.vel_iters,
+            max_depenetration_velocity: cfg.max_depenetration_velocity,
+            rest_offset: cfg.rest_offset,
+            max_speed: cfg.max_speed,
+            _pad: 0,
+            gravity: model.gravity.extend(0.0).to_array(),
+        };
+        let bodies: Vec<BodyGpu> = (0..model.body_count())
+            .map(|i| {
+                let m = model.body_inv_inertia[i];
+                BodyGpu {
+                    inv_inertia: [
+                        m.x_axis.extend(0.0).to_array(),
+                        m.y_axis.extend(0.0).to_array(),
+                        m.z_axis.extend(0.0).to_array(),
+                    ],
+                    com_inv_mass: model.body_com[i].extend(model.body_inv_mass[i]).to_array(),
+                }
+            })
+            .collect();
+        let dev = &gpu.device;
+        let uniform = {
+            use wgpu::util::DeviceExt;
+            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("solver-params"),
+                contents: bytemuck::bytes_of(&params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        };
+        let none = wgpu::BufferUsages::empty();
+        let bodies_buf = gpu.storage_buffer("bodies", &bodies, none);
+        let nbw = (world_count * contacts.body_count) as u64;
+        let body_qd = gpu.storage_buffer_zeroed("body_qd", nbw * 2 * 16);
+        let scratch_bytes = (world_count as u64 + world_count as u64 * max_rows as u64 * 2) * 16;
+        if scratch_bytes > gpu.limits().max_storage_buffer_binding_size {
+            return Err(EngineError::TooLarge {
+                what: format!("solver rows for {world_count} worlds x {max_rows} contacts"),
+                needed_bytes: scratch_bytes,
+                limit_bytes: gpu.limits().max_storage_buffer_binding_size,
+                hint: "use fewer worlds per pipeline or a smaller max_patches".into(),
+            });
+        }
+        let scratch = gpu.storage_buffer_zeroed("solver_scratch", scratch_bytes);
+        let pipeline =
+            compute_pipeline(dev, "solver-step", &shader_source(SOLVER_WGSL, contacts.cfg.max_patches), "step");
+        let group = |index: u32, buffers: &[&wgpu::Buffer]| {
+            dev.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &pipeline.get_bind_group_layout(index),
+                entries: &buffers
+                    .iter()
+                    .enumerate()
+                    .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                    .collect::<Vec<_>>(),
+            })
+        };
+        let groups = [
+            group(0, &[&uniform, &contacts.pairs, &contacts.sdf_values, &bodies_buf]),
+            group(1, &[&contacts.patches, &contacts.patch_counts]),
+            group(2, &[&contacts.body_q, &body_qd, &scratch]),
+        ];
+        Ok(GpuSolver { cfg: cfg.clone(), body_qd, scratch, pipeline, groups, world_count })
+    }
+
+    /// Uploads a state (poses go to the contact pipeline's body_q).
+    pub fn write_state(&self, gpu: &GpuContext, contacts: &ContactPipeline, state: &BodyState) {
+        contacts.write_body_q(gpu, &state.body_q);
+        let qd: Vec<[f32; 4]> =
+            state.body_qd.iter().flat_map(|v| [v[0].extend(0.0).to_array(), v[1].extend(0.0).to_array()]).collect();
+        if !qd.is_empty() {
+            gpu.queue.write_buffer(&self.body_qd, 0, bytemuck::cast_slice(&qd));
+        }
+    }
+
+    /// Records one solver step (after the contact pipeline's dispatches of the same frame).
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
+        let mut pass =
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("solver"), timestamp_writes: None });
+        pass.set_pipeline(&self.pipeline);
+        for (i, g) in self.groups.iter().enumerate() {
+            pass.set_bind_group(i as u32, g, &[]);
+        }
+        pass.dispatch_workgroups(self.world_count.div_ceil(SOLVER_WG), 1, 1);
+    }
+
+    /// Reads poses, velocities and per-world status back (waits for the GPU).
+    pub fn read_state(&self, gpu: &GpuContext, contacts: &ContactPipeline) -> (BodyState, Vec<bool>) {
+        let q: Vec<crate::contact::TransformGpu> = gpu.read_buffer(&contacts.body_q);
+        let qd: Vec<[f32; 4]> = gpu.read_buffer(&self.body_qd);
+        let scratch: Vec<[f32; 4]> = gpu.read_buffer(&self.scratch);
+        let n = (self.world_count * contacts.body_count) as usize;
+        let body_qd = (0..n)
+            .map(|i| [glam::Vec4::from_array(qd[2 * i]).truncate(), glam::Vec4::from_array(qd[2 * i + 1]).truncate()])
+            .collect();
+        let ok = scratch[..self.world_count as usize].iter().map(|s| s[0] == 1.0).collect();
+        (BodyState { body_q: q[..n].to_vec(), body_qd }, ok)
+    }
+}

@@ -1,0 +1,257 @@
+// Rigid-body step on the GPU (WGSL twin of solver::step_cpu; see solver/mod.rs for the scheme): one
+// invocation per world, because Gauss-Seidel is serial inside a world and the worlds are independent.
+// Prepended by the host: contact/common.wgsl (Pair, Transform, PatchOut, quaternion helpers), and appended:
+// contact/sdf_sample.wgsl and sdf/thread.wgsl (the SDF is re-sampled at every contact in every sweep).
+//
+// On a GPU one invocation per world keeps a warp busy with 32 worlds: fine for the thousands of worlds of
+// RL training, poor for one world with many contacts (graph colouring would be the next step there).
+
+struct SolverParams {
+    world_count: u32,
+    body_count: u32,
+    pair_count: u32,
+    max_rows: u32,
+    dt: f32,
+    substeps: u32,
+    pos_iters: u32,
+    vel_iters: u32,
+    max_depenetration_velocity: f32,
+    rest_offset: f32,
+    max_speed: f32,
+    _pad: u32,
+    gravity: vec4<f32>,
+}
+
+struct Body {
+    // Inverse inertia about the COM in body axes, columns [1/(kg m^2)].
+    inv_inertia: mat3x3<f32>,
+    // COM in the body frame xyz [m], inverse mass w [1/kg].
+    com_inv_mass: vec4<f32>,
+}
+
+// A contact row: anchor (query element point in body a's frame) xyz + pair index (bits) w; accumulated
+// impulses (normal, tangent 1, tangent 2) xyz and friction coefficient w.
+struct Row {
+    anchor: vec4<f32>,
+    lambda: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> sp: SolverParams;
+@group(0) @binding(1) var<storage, read> pairs: array<Pair>;
+@group(0) @binding(2) var<storage, read> sdf_values: array<u32>;
+@group(0) @binding(3) var<storage, read> bodies: array<Body>;
+@group(1) @binding(0) var<storage, read> patches: array<PatchOut>;
+@group(1) @binding(1) var<storage, read> patch_counts: array<u32>;
+@group(2) @binding(0) var<storage, read_write> body_q: array<Transform>;
+@group(2) @binding(1) var<storage, read_write> body_qd: array<vec4<f32>>;  // [lin, ang] per body
+// [world_count] status (x: 1 ok, 0 diverged), then 2 * max_rows vec4 per world (Row.anchor, Row.lambda).
+@group(2) @binding(2) var<storage, read_write> solver_scratch: array<vec4<f32>>;
+
+fn quat_to_mat3(q: vec4<f32>) -> mat3x3<f32> {
+    let x = q.x;
+    let y = q.y;
+    let z = q.z;
+    let w = q.w;
+    return mat3x3<f32>(
+        vec3<f32>(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)),
+        vec3<f32>(2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)),
+        vec3<f32>(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)),
+    );
+}
+
+// The same orthonormal choice as glam's Vec3::any_orthonormal_vector (Duff et al. 2017).
+fn any_orthonormal(n: vec3<f32>) -> vec3<f32> {
+    let sign = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    return vec3<f32>(b, sign + n.y * n.y * a, -n.y);
+}
+
+struct BodyView {
+    pos: vec3<f32>,
+    rot: vec4<f32>,
+    com: vec3<f32>,
+    inv_mass: f32,
+    inv_i: mat3x3<f32>,
+    index: u32, // global body index, NONE for the static world
+}
+
+fn view(world: u32, b: u32) -> BodyView {
+    if (b == NONE) {
+        return BodyView(vec3<f32>(0.0), vec4<f32>(0.0, 0.0, 0.0, 1.0), vec3<f32>(0.0), 0.0, mat3x3<f32>(), NONE);
+    }
+    let g = world * sp.body_count + b;
+    let t = body_q[g];
+    let m = bodies[b];
+    var inv_i = mat3x3<f32>();
+    if (m.com_inv_mass.w > 0.0) {
+        let r = quat_to_mat3(t.q);
+        inv_i = r * m.inv_inertia * transpose(r);
+    }
+    return BodyView(t.p.xyz, t.q, m.com_inv_mass.xyz, m.com_inv_mass.w, inv_i, g);
+}
+
+fn vel_lin(v: BodyView) -> vec3<f32> {
+    if (v.index == NONE) {
+        return vec3<f32>(0.0);
+    }
+    return body_qd[2u * v.index].xyz;
+}
+
+fn vel_ang(v: BodyView) -> vec3<f32> {
+    if (v.index == NONE) {
+        return vec3<f32>(0.0);
+    }
+    return body_qd[2u * v.index + 1u].xyz;
+}
+
+fn apply(v: BodyView, r: vec3<f32>, imp: vec3<f32>, sign: f32) {
+    if (v.index == NONE || v.inv_mass == 0.0) {
+        return;
+    }
+    body_qd[2u * v.index] = vec4<f32>(vel_lin(v) + sign * v.inv_mass * imp, 0.0);
+    body_qd[2u * v.index + 1u] = vec4<f32>(vel_ang(v) + sign * (v.inv_i * cross(r, imp)), 0.0);
+}
+
+fn eff_mass(va: BodyView, vb: BodyView, ra: vec3<f32>, rb: vec3<f32>, d: vec3<f32>) -> f32 {
+    let ca = cross(ra, d);
+    let cb = cross(rb, d);
+    return va.inv_mass + vb.inv_mass + dot(ca, va.inv_i * ca) + dot(cb, vb.inv_i * cb);
+}
+
+fn solve_row(world: u32, ri: u32, h: f32, bias: bool) {
+    let anchor = solver_scratch[ri];
+    var lambda = solver_scratch[ri + 1u];
+    let pair = pairs[bitcast<u32>(anchor.w)];
+    let va = view(world, pair.body_a);
+    let vb = view(world, pair.body_b);
+    let x = va.pos + quat_rotate(va.rot, anchor.xyz);
+    let shape_b = xf_mul(Transform(vec4<f32>(vb.pos, 0.0), vb.rot), Transform(pair.b_pos, pair.b_rot));
+    let s0 = sdf_sample(pair, xf_point(xf_inv(shape_b), x));
+    let glen = length(s0.g);
+    if (glen <= 0.0) {
+        return;
+    }
+    let n = quat_rotate(shape_b.q, s0.g / glen);
+    let s = s0.d - pair.radius - sp.rest_offset;
+    let xa = x - pair.radius * n;
+    let ra = xa - (va.pos + quat_rotate(va.rot, va.com));
+    let rb = xa - (vb.pos + quat_rotate(vb.rot, vb.com));
+    let k = eff_mass(va, vb, ra, rb, n);
+    if (k <= 0.0) {
+        return;
+    }
+    var goal = 0.0;
+    if (s > 0.0) {
+        goal = -s / h;
+    } else if (bias) {
+        goal = min(-s / h, sp.max_depenetration_velocity);
+    }
+    let vn = dot((vel_lin(va) + cross(vel_ang(va), ra)) - (vel_lin(vb) + cross(vel_ang(vb), rb)), n);
+    let new_n = max(lambda.x + (goal - vn) / k, 0.0);
+    let dn = new_n - lambda.x;
+    lambda.x = new_n;
+    apply(va, ra, n * dn, 1.0);
+    apply(vb, rb, n * dn, -1.0);
+    let mu = lambda.w;
+    if (mu > 0.0) {
+        let t1 = any_orthonormal(n);
+        let t2 = cross(n, t1);
+        let limit = mu * lambda.x;
+        for (var j = 0u; j < 2u; j++) {
+            let t = select(t2, t1, j == 0u);
+            let kt = eff_mass(va, vb, ra, rb, t);
+            if (kt <= 0.0) {
+                continue;
+            }
+            let vt = dot((vel_lin(va) + cross(vel_ang(va), ra)) - (vel_lin(vb) + cross(vel_ang(vb), rb)), t);
+            let old = select(lambda.z, lambda.y, j == 0u);
+            let new_t = clamp(old - vt / kt, -limit, limit);
+            if (j == 0u) {
+                lambda.y = new_t;
+            } else {
+                lambda.z = new_t;
+            }
+            apply(va, ra, t * (new_t - old), 1.0);
+            apply(vb, rb, t * (new_t - old), -1.0);
+        }
+    }
+    solver_scratch[ri + 1u] = lambda;
+}
+
+@compute @workgroup_size(64)
+fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let world = gid.x;
+    if (world >= sp.world_count) {
+        return;
+    }
+    let h = sp.dt / f32(sp.substeps);
+    // Rows from the reduced contacts: the query element's point in body a's frame at the frame's start.
+    let row0 = sp.world_count + world * sp.max_rows * 2u;
+    var n_rows = 0u;
+    for (var p = 0u; p < sp.pair_count; p++) {
+        let pair = pairs[p];
+        let va = view(world, pair.body_a);
+        let pw = world * sp.pair_count + p;
+        let count = patch_counts[pw];
+        for (var i = 0u; i < count; i++) {
+            let pt = patches[pw * MAX_PATCHES + i];
+            for (var k = 0u; k < 4u; k++) {
+                let c = pt.slots[k];
+                if (c.w < VALID_BELOW && n_rows < sp.max_rows) {
+                    let q = c.xyz + pair.radius * pt.normal.xyz;
+                    let local = quat_rotate(vec4<f32>(-va.rot.xyz, va.rot.w), q - va.pos);
+                    solver_scratch[row0 + 2u * n_rows] = vec4<f32>(local, bitcast<f32>(p));
+                    solver_scratch[row0 + 2u * n_rows + 1u] = vec4<f32>(0.0, 0.0, 0.0, pair.friction);
+                    n_rows += 1u;
+                }
+            }
+        }
+    }
+    let first = world * sp.body_count;
+    for (var sub = 0u; sub < sp.substeps; sub++) {
+        for (var b = 0u; b < sp.body_count; b++) {
+            if (bodies[b].com_inv_mass.w > 0.0) {
+                let g = first + b;
+                body_qd[2u * g] = vec4<f32>(body_qd[2u * g].xyz + sp.gravity.xyz * h, 0.0);
+            }
+        }
+        for (var it = 0u; it < sp.pos_iters; it++) {
+            for (var r = 0u; r < n_rows; r++) {
+                solve_row(world, row0 + 2u * r, h, true);
+            }
+        }
+        for (var b = 0u; b < sp.body_count; b++) {
+            let m = bodies[b];
+            if (m.com_inv_mass.w > 0.0) {
+                let g = first + b;
+                let t = body_q[g];
+                let c = t.p.xyz + quat_rotate(t.q, m.com_inv_mass.xyz) + body_qd[2u * g].xyz * h;
+                let w = body_qd[2u * g + 1u].xyz;
+                let dq = quat_mul(vec4<f32>(w, 0.0), t.q) * (0.5 * h);
+                let q2 = normalize(t.q + dq);
+                body_q[g] = Transform(vec4<f32>(c - quat_rotate(q2, m.com_inv_mass.xyz), 0.0), q2);
+            }
+        }
+        for (var it = 0u; it < sp.vel_iters; it++) {
+            for (var r = 0u; r < n_rows; r++) {
+                solve_row(world, row0 + 2u * r, h, false);
+            }
+        }
+    }
+    // A world that went non-finite or faster than max_speed is flagged for the caller to reset.
+    var ok = 1.0;
+    for (var b = 0u; b < sp.body_count; b++) {
+        let g = first + b;
+        let v = body_qd[2u * g].xyz;
+        let sum = vec4<f32>(body_q[g].p.xyz, 0.0) + body_q[g].q + vec4<f32>(v + body_qd[2u * g + 1u].xyz, 0.0);
+        // Exponent bits all set = NaN or inf (checked on the bits: WGSL lets compilers assume finite math,
+        // so float comparisons cannot be trusted to see a NaN).
+        let bits = bitcast<vec4<u32>>(sum) & vec4<u32>(0x7f800000u);
+        let finite = !any(bits == vec4<u32>(0x7f800000u));
+        if (!finite || length(v) > sp.max_speed) {
+            ok = 0.0;
+        }
+    }
+    solver_scratch[world] = vec4<f32>(ok, f32(n_rows), 0.0, 0.0);
+}
