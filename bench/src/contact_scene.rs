@@ -129,8 +129,20 @@ pub fn lower_until_touch(
     };
     let (mut hi, mut lo) = (lift_hi, lift_lo);
     let d_hi = depth_at(hi);
-    assert!(d_hi > 0.0, "start pose must be separated (deepest {d_hi} m at lift {hi} m)");
-    assert!(depth_at(lo) < 0.0, "end pose must penetrate");
+    if d_hi <= 0.0 {
+        return Err(factory_engine::EngineError::Config {
+            field: "lift_hi",
+            value: format!("{hi} m (deepest contact {d_hi} m)"),
+            expected: "a separated start pose".into(),
+        });
+    }
+    if depth_at(lo) >= 0.0 {
+        return Err(factory_engine::EngineError::Config {
+            field: "lift_lo",
+            value: format!("{lo} m"),
+            expected: "a penetrating end pose".into(),
+        });
+    }
     for _ in 0..40 {
         let mid = 0.5 * (hi + lo);
         let d = depth_at(mid);

@@ -2,3 +2,4 @@
 //! accuracy tests that share them.
 
 pub mod contact_scene;
+pub mod scene;

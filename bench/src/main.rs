@@ -36,8 +36,52 @@ enum SdfKind {
     Analytic,
 }
 
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum SceneName {
+    /// M16 (or --size) nut released on its bolt, one pair per world.
+    NutBolt,
+}
+
 #[derive(Subcommand)]
 enum Cmd {
+    /// Whole frames (contacts + solver on the GPU) of a paper scene (Table II) with its accuracy figures.
+    Scene {
+        #[arg(value_enum)]
+        name: SceneName,
+        /// Parallel worlds.
+        #[arg(long, default_value_t = 1)]
+        worlds: u32,
+        /// Simulated time [s].
+        #[arg(long, default_value_t = 1.0)]
+        seconds: f32,
+        /// Frame time step [s].
+        #[arg(long, default_value_t = 1.0 / 60.0)]
+        dt: f32,
+        #[arg(long, default_value_t = 1)]
+        substeps: u32,
+        #[arg(long, default_value_t = 20)]
+        pos_iters: u32,
+        #[arg(long, default_value_t = 1)]
+        vel_iters: u32,
+        /// Bolt SDF: `analytic` or a grid resolution (e.g. 256).
+        #[arg(long, default_value = "analytic")]
+        sdf_res: String,
+        /// Patch budget per pair (16..=256).
+        #[arg(long, default_value_t = 64)]
+        patches: u32,
+        /// Friction coefficient (the paper's scene: 0.05).
+        #[arg(long, default_value_t = 0.05)]
+        mu: f32,
+        /// ISO size (M4, M8, M12, M16, M20).
+        #[arg(long, default_value = "M16")]
+        size: String,
+        /// Tolerance end: tight or loose.
+        #[arg(long, default_value = "tight")]
+        fit: String,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Contact generation + reduction for N parallel copies of a shape pair (paper Table I).
     Contacts {
         /// Which generated pair (ignored with --mesh-a/--mesh-b).
@@ -91,6 +135,32 @@ enum Cmd {
 
 fn main() -> Result<()> {
     match Cli::parse().cmd {
+        Cmd::Scene { name: SceneName::NutBolt, worlds, seconds, dt, substeps, pos_iters, vel_iters, sdf_res, patches, mu, size, fit, json } => {
+            let sdf_resolution = match sdf_res.as_str() {
+                "analytic" => None,
+                r => Some(r.parse::<u32>().map_err(|_| anyhow::anyhow!("--sdf-res {r:?}: valid values are `analytic` or a grid resolution such as 256"))?),
+            };
+            let run = factory_bench::scene::NutBoltRun {
+                size: size.parse().map_err(|e| anyhow::anyhow!("--size: {e}"))?,
+                fit: fit.parse().map_err(|e| anyhow::anyhow!("--fit: {e}"))?,
+                worlds,
+                seconds,
+                sdf_resolution,
+                contact: ContactConfig { max_patches: patches, ..Default::default() },
+                solver: factory_engine::solver::SolverConfig { dt, substeps, pos_iters, vel_iters, ..Default::default() },
+                mu,
+                contact_offset: 1e-3,
+            };
+            if !(mu.is_finite() && mu >= 0.0) {
+                bail!("--mu {mu}: the friction coefficient must be finite and >= 0");
+            }
+            let report = factory_bench::scene::run_nut_bolt(GpuContext::global()?, &run)?;
+            if json {
+                println!("{}", serde_json::to_string(&report)?);
+            } else {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            }
+        }
         Cmd::Contacts {
             pair,
             size,

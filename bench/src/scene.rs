@@ -1,0 +1,158 @@
+//! `factory-bench scene`: whole frames (contact handling + Gauss-Seidel solve, both on the GPU) of the
+//! paper's scenes (section III-D, Table II), with the scene's accuracy figures. Scenes so far: nut-bolt.
+//! (Peg-in-hole, piles of nuts, bowls and toruses are the next scenes.)
+
+use crate::contact_scene::{lower_until_touch, ContactScene, PartPair};
+use anyhow::{ensure, Result};
+use factory_assets::{nut_bolt, Fit, IsoSize, ThreadOptions};
+use factory_engine::contact::{ContactConfig, ContactPipeline};
+use factory_engine::gpu::GpuContext;
+use factory_engine::sdf::cache::SdfCache;
+use factory_engine::solver::gpu::GpuSolver;
+use factory_engine::solver::{BodyModel, BodyState, SolverConfig};
+use glam::{Quat, Vec3};
+use std::time::Instant;
+
+/// Settings of one nut-bolt run.
+#[derive(Clone, Debug)]
+pub struct NutBoltRun {
+    pub size: IsoSize,
+    pub fit: Fit,
+    pub worlds: u32,
+    /// Simulated time [s].
+    pub seconds: f32,
+    /// `None`: the exact analytic bolt SDF; `Some(r)`: a grid baked at resolution r.
+    pub sdf_resolution: Option<u32>,
+    pub contact: ContactConfig,
+    pub solver: SolverConfig,
+    /// Friction coefficient (the paper's nut-bolt scene: 0.05).
+    pub mu: f32,
+    /// Contact offset [m].
+    pub contact_offset: f32,
+}
+
+/// What the run measured.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct NutBoltReport {
+    pub scene: &'static str,
+    pub size: String,
+    pub fit: String,
+    pub worlds: u32,
+    pub seconds: f32,
+    pub frames: u32,
+    pub dt: f32,
+    pub substeps: u32,
+    pub pos_iters: u32,
+    pub vel_iters: u32,
+    pub sdf: String,
+    pub max_patches: u32,
+    pub mu: f32,
+    /// Wall time of the frames (submission to completion; readbacks for the figures excluded) [s].
+    pub wall_s: f64,
+    pub ms_per_frame: f64,
+    pub pair_seconds_per_wall_second: f64,
+    /// Real-time factor of one world.
+    pub real_time_factor_per_world: f64,
+    /// World 0: descent of the nut [mm] and signed turns (negative = clockwise seen from +z).
+    pub nut_descent_mm: f64,
+    pub nut_turns: f64,
+    /// Frictionless analytic descent g m / (m + I (2 pi / p)^2) t^2 / 2 [mm] (for mu = 0 runs).
+    pub analytic_descent_mm: f64,
+    /// Deepest contact seen in any world at any frame start [mm] (positive: penetration).
+    pub max_penetration_mm: f64,
+    pub nut_mass_kg: f32,
+    pub nut_inertia_axis_kgm2: f32,
+    pub pitch_mm: f32,
+    /// Every world stayed finite and below the solver's speed bound.
+    pub finite: bool,
+    pub adapter: String,
+}
+
+/// Runs the nut-bolt scene: each world's nut is released touching its bolt, 5 pitches above the seat.
+pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport> {
+    ensure!(run.worlds > 0, "--worlds must be at least 1");
+    ensure!(run.seconds > 0.0 && run.seconds.is_finite(), "--seconds must be > 0, got {}", run.seconds);
+    run.solver.validate()?;
+    let nb = nut_bolt(run.size, run.fit, &ThreadOptions::default())?;
+    let pair = PartPair { name: "nut-bolt".into(), a: nb.nut.mesh.clone(), b: nb.bolt.mesh.clone(), pitch: nb.pitch, side_shift: 0.0 };
+    let mut scene = match run.sdf_resolution {
+        None => ContactScene::with_thread_sdf(pair, nb.bolt_sdf(), run.contact_offset),
+        Some(r) => ContactScene::new(pair, r, run.contact_offset, &SdfCache::new(SdfCache::default_dir()))?,
+    };
+    scene.model.pairs[0].friction = run.mu;
+    let p = nb.pitch;
+    // Touching: lowered from the centred pose until the deepest contact is zero (when the grid's error
+    // already reports penetration there, start from the centred pose).
+    let lift = lower_until_touch(gpu, &scene, 5.0 * p, 5.0 * p - 0.1e-3, 0.2e-6).unwrap_or(5.0 * p);
+    let pipe = ContactPipeline::new(gpu, &scene.model, run.worlds, &run.contact)?;
+    let mp = nb.nut.mass_properties;
+    let mut model = BodyModel { gravity: Vec3::new(0.0, 0.0, -9.81), ..Default::default() };
+    model.add_dynamic(mp.mass, mp.inertia, mp.com);
+    model.add_static();
+    let solver = GpuSolver::new(gpu, &pipe, &model, &run.solver)?;
+    let state = BodyState { body_q: scene.poses(lift, &vec![0.0; run.worlds as usize]), body_qd: vec![[Vec3::ZERO; 2]; 2 * run.worlds as usize] };
+    solver.write_state(gpu, &pipe, &state);
+    let frames = (run.seconds / run.solver.dt).round().max(1.0) as u32;
+    let z0 = state.body_q[0].p[2];
+    let (mut yaw, mut last, mut wall, mut deepest) = (0.0f64, 0.0f64, 0.0f64, f32::INFINITY);
+    let mut finite = true;
+    for _ in 0..frames {
+        let t = Instant::now();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        pipe.encode(&mut enc);
+        solver.encode(&mut enc);
+        gpu.queue.submit([enc.finish()]);
+        gpu.wait();
+        wall += t.elapsed().as_secs_f64();
+        // Figures (outside the timing): the frame's contacts and world 0's turn.
+        if let Some(d) = min_depth_all(&pipe.read(gpu)) {
+            deepest = deepest.min(d);
+        }
+        let (s, ok) = solver.read_state(gpu, &pipe);
+        finite &= ok.iter().all(|&o| o);
+        let q = Quat::from_xyzw(s.body_q[0].q[0], s.body_q[0].q[1], s.body_q[0].q[2], s.body_q[0].q[3]);
+        let (axis, angle) = q.to_axis_angle();
+        let now = (angle * axis.z.signum()) as f64;
+        let mut d = now - last;
+        d -= std::f64::consts::TAU * (d / std::f64::consts::TAU).round();
+        yaw += d;
+        last = now;
+    }
+    let (s, _) = solver.read_state(gpu, &pipe);
+    let sim = frames as f64 * run.solver.dt as f64;
+    let k = std::f64::consts::TAU / p as f64;
+    let (m, i) = (mp.mass as f64, mp.inertia.z_axis.z as f64);
+    Ok(NutBoltReport {
+        scene: "nut-bolt",
+        size: run.size.name().into(),
+        fit: run.fit.name().into(),
+        worlds: run.worlds,
+        seconds: sim as f32,
+        frames,
+        dt: run.solver.dt,
+        substeps: run.solver.substeps,
+        pos_iters: run.solver.pos_iters,
+        vel_iters: run.solver.vel_iters,
+        sdf: run.sdf_resolution.map_or("analytic".into(), |r| format!("grid {r}")),
+        max_patches: run.contact.max_patches,
+        mu: run.mu,
+        wall_s: wall,
+        ms_per_frame: wall * 1e3 / frames as f64,
+        pair_seconds_per_wall_second: run.worlds as f64 * sim / wall,
+        real_time_factor_per_world: sim / wall,
+        nut_descent_mm: (z0 - s.body_q[0].p[2]) as f64 * 1e3,
+        nut_turns: yaw / std::f64::consts::TAU,
+        analytic_descent_mm: 0.5 * 9.81 * m / (m + i * k * k) * sim * sim * 1e3,
+        max_penetration_mm: (-deepest as f64 * 1e3).max(0.0),
+        nut_mass_kg: mp.mass,
+        nut_inertia_axis_kgm2: mp.inertia.z_axis.z,
+        pitch_mm: p * 1e3,
+        finite,
+        adapter: gpu.info.name.clone(),
+    })
+}
+
+/// Deepest contact over every pair and world.
+fn min_depth_all(c: &factory_engine::contact::ContactsHost) -> Option<f32> {
+    c.patches.iter().flat_map(|ps| ps.iter().flat_map(|p| p.contacts.iter().map(|c| c.depth))).reduce(f32::min)
+}
