@@ -74,7 +74,13 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
     ensure!(run.seconds > 0.0 && run.seconds.is_finite(), "--seconds must be > 0, got {}", run.seconds);
     run.solver.validate()?;
     let nb = nut_bolt(run.size, run.fit, &ThreadOptions::default())?;
-    let pair = PartPair { name: "nut-bolt".into(), a: nb.nut.mesh.clone(), b: nb.bolt.mesh.clone(), pitch: nb.pitch, side_shift: 0.0 };
+    let pair = PartPair {
+        name: "nut-bolt".into(),
+        a: nb.nut.mesh.clone(),
+        b: nb.bolt.mesh.clone(),
+        pitch: nb.pitch,
+        side_shift: 0.0,
+    };
     let mut scene = match run.sdf_resolution {
         None => ContactScene::with_thread_sdf(pair, nb.bolt_sdf(), run.contact_offset),
         Some(r) => ContactScene::new(pair, r, run.contact_offset, &SdfCache::new(SdfCache::default_dir()))?,
@@ -90,11 +96,14 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
     model.add_dynamic(mp.mass, mp.inertia, mp.com);
     model.add_static();
     let solver = GpuSolver::new(gpu, &pipe, &model, &run.solver)?;
-    let state = BodyState { body_q: scene.poses(lift, &vec![0.0; run.worlds as usize]), body_qd: vec![[Vec3::ZERO; 2]; 2 * run.worlds as usize] };
+    let state = BodyState {
+        body_q: scene.poses(lift, &vec![0.0; run.worlds as usize]),
+        body_qd: vec![[Vec3::ZERO; 2]; 2 * run.worlds as usize],
+    };
     solver.write_state(gpu, &pipe, &state);
     let frames = (run.seconds / run.solver.dt).round().max(1.0) as u32;
     let z0 = state.body_q[0].p[2];
-    let (mut yaw, mut last, mut wall, mut deepest) = (0.0f64, 0.0f64, 0.0f64, f32::INFINITY);
+    let (mut yaw, mut wall, mut deepest) = (TurnCounter::default(), 0.0f64, f32::INFINITY);
     let mut finite = true;
     for _ in 0..frames {
         let t = Instant::now();
@@ -110,13 +119,7 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         }
         let (s, ok) = solver.read_state(gpu, &pipe);
         finite &= ok.iter().all(|&o| o);
-        let q = Quat::from_xyzw(s.body_q[0].q[0], s.body_q[0].q[1], s.body_q[0].q[2], s.body_q[0].q[3]);
-        let (axis, angle) = q.to_axis_angle();
-        let now = (angle * axis.z.signum()) as f64;
-        let mut d = now - last;
-        d -= std::f64::consts::TAU * (d / std::f64::consts::TAU).round();
-        yaw += d;
-        last = now;
+        yaw.update(&s.body_q[0]);
     }
     let (s, _) = solver.read_state(gpu, &pipe);
     let sim = frames as f64 * run.solver.dt as f64;
@@ -141,7 +144,7 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         pair_seconds_per_wall_second: run.worlds as f64 * sim / wall,
         real_time_factor_per_world: sim / wall,
         nut_descent_mm: (z0 - s.body_q[0].p[2]) as f64 * 1e3,
-        nut_turns: yaw / std::f64::consts::TAU,
+        nut_turns: yaw.radians / std::f64::consts::TAU,
         analytic_descent_mm: 0.5 * 9.81 * m / (m + i * k * k) * sim * sim * 1e3,
         max_penetration_mm: (-deepest as f64 * 1e3).max(0.0),
         nut_mass_kg: mp.mass,
@@ -150,6 +153,27 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         finite,
         adapter: gpu.info.name.clone(),
     })
+}
+
+/// Accumulated rotation about z of a body sampled once per frame (less than half a turn per frame).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TurnCounter {
+    /// Signed total angle [rad] (negative = clockwise seen from +z).
+    pub radians: f64,
+    last: f64,
+}
+
+impl TurnCounter {
+    /// Adds the rotation since the previous sample of `pose`.
+    pub fn update(&mut self, pose: &factory_engine::contact::TransformGpu) {
+        let q = Quat::from_xyzw(pose.q[0], pose.q[1], pose.q[2], pose.q[3]);
+        let (axis, angle) = q.to_axis_angle();
+        let now = (angle * axis.z.signum()) as f64;
+        let mut d = now - self.last;
+        d -= std::f64::consts::TAU * (d / std::f64::consts::TAU).round();
+        self.radians += d;
+        self.last = now;
+    }
 }
 
 /// Deepest contact over every pair and world.

@@ -5,11 +5,12 @@
 
 use factory_assets::{nut_bolt, Fit, IsoSize, ThreadOptions};
 use factory_bench::contact_scene::{lower_until_touch, ContactScene, PartPair};
+use factory_bench::scene::TurnCounter;
 use factory_engine::contact::{ContactConfig, ContactPipeline};
 use factory_engine::gpu::GpuContext;
 use factory_engine::solver::gpu::GpuSolver;
 use factory_engine::solver::{step_cpu, BodyModel, BodyState, SolverConfig};
-use glam::{Quat, Vec3};
+use glam::Vec3;
 
 /// Descent after 1 s within 5% of the analytic value (the tolerance).
 const DESCENT_TOL: f64 = 0.05;
@@ -50,7 +51,7 @@ fn release_nut(mu: f32, frames: u32, on_gpu: bool) -> Run {
     let mut state = BodyState { body_q: scene.poses(lift, &[0.0]), body_qd: vec![[Vec3::ZERO; 2]; 2] };
     let cfg = SolverConfig::default();
     let z0 = state.body_q[0].p[2];
-    let (mut yaw, mut last) = (0.0f64, 0.0f64);
+    let mut yaw = TurnCounter::default();
     let solver = GpuSolver::new(gpu, &pipe, &model, &cfg).unwrap();
     solver.write_state(gpu, &pipe, &state);
     for _ in 0..frames {
@@ -71,17 +72,11 @@ fn release_nut(mu: f32, frames: u32, on_gpu: bool) -> Run {
             let ok = step_cpu(&model, &mut state, &contacts, &pipe.flat, &cfg);
             assert!(ok[0], "world diverged");
         }
-        let q = Quat::from_xyzw(state.body_q[0].q[0], state.body_q[0].q[1], state.body_q[0].q[2], state.body_q[0].q[3]);
-        let (axis, angle) = q.to_axis_angle();
-        let now = (angle * axis.z.signum()) as f64;
-        let mut d = now - last;
-        d -= std::f64::consts::TAU * (d / std::f64::consts::TAU).round();
-        yaw += d;
-        last = now;
+        yaw.update(&state.body_q[0]);
     }
     Run {
         descent: (z0 - state.body_q[0].p[2]) as f64,
-        yaw,
+        yaw: yaw.radians,
         mass: mp.mass as f64,
         inertia_axis: mp.inertia.z_axis.z as f64,
         pitch: p as f64,

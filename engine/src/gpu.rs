@@ -182,6 +182,24 @@ impl GpuContext {
         })
     }
 
+    /// Bind group `index` of `pipeline` with `buffers` at bindings 0, 1, ... (whole buffers).
+    pub fn bind_group(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        index: u32,
+        buffers: &[&wgpu::Buffer],
+    ) -> wgpu::BindGroup {
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &pipeline.get_bind_group_layout(index),
+            entries: &buffers
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                .collect::<Vec<_>>(),
+        })
+    }
+
     /// Copies `buffer` back to the host and waits. For tests, benchmarks and logging; never in a step loop.
     pub fn read_buffer<T: Pod>(&self, buffer: &wgpu::Buffer) -> Vec<T> {
         let size = buffer.size();

@@ -170,17 +170,7 @@ impl GpuSolver {
         let scratch = gpu.storage_buffer_zeroed("solver_scratch", scratch_bytes);
         let pipeline =
             compute_pipeline(dev, "solver-step", &shader_source(SOLVER_WGSL, contacts.cfg.max_patches), "step");
-        let group = |index: u32, buffers: &[&wgpu::Buffer]| {
-            dev.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: None,
-                layout: &pipeline.get_bind_group_layout(index),
-                entries: &buffers
-                    .iter()
-                    .enumerate()
-                    .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-                    .collect::<Vec<_>>(),
-            })
-        };
+        let group = |index: u32, buffers: &[&wgpu::Buffer]| gpu.bind_group(&pipeline, index, buffers);
         let groups = [
             group(0, &[&uniform, &contacts.pairs, &contacts.sdf_values, &bodies_buf]),
             group(1, &[&contacts.patches, &contacts.patch_counts]),
