@@ -22,6 +22,8 @@ const G: f32 = 9.81;
 /// and 1 velocity iteration): descent [m], signed turns, and the nut's mass properties.
 struct Run {
     descent: f64,
+    /// Largest |z - z0| over all frames [m].
+    excursion: f64,
     yaw: f64,
     mass: f64,
     inertia_axis: f64,
@@ -29,7 +31,7 @@ struct Run {
     seconds: f64,
 }
 
-fn release_nut(mu: f32, frames: u32, on_gpu: bool) -> Run {
+fn release_nut(mu: f32, frames: u32, on_gpu: bool, substeps: u32) -> Run {
     let nb = nut_bolt(IsoSize::M16, Fit::Tight, &ThreadOptions::default()).unwrap();
     let pair = PartPair {
         name: "M16".into(),
@@ -49,8 +51,9 @@ fn release_nut(mu: f32, frames: u32, on_gpu: bool) -> Run {
     model.add_dynamic(mp.mass, mp.inertia, mp.com);
     model.add_static();
     let mut state = BodyState { body_q: scene.poses(lift, &[0.0]), body_qd: vec![[Vec3::ZERO; 2]; 2] };
-    let cfg = SolverConfig::default();
+    let cfg = SolverConfig { substeps, ..Default::default() };
     let z0 = state.body_q[0].p[2];
+    let mut excursion = 0.0f64;
     let mut yaw = TurnCounter::default();
     let solver = GpuSolver::new(gpu, &pipe, &model, &cfg).unwrap();
     solver.write_state(gpu, &pipe, &state);
@@ -73,9 +76,11 @@ fn release_nut(mu: f32, frames: u32, on_gpu: bool) -> Run {
             assert!(ok[0], "world diverged");
         }
         yaw.update(&state.body_q[0]);
+        excursion = excursion.max((state.body_q[0].p[2] - z0).abs() as f64);
     }
     Run {
         descent: (z0 - state.body_q[0].p[2]) as f64,
+        excursion,
         yaw: yaw.radians,
         mass: mp.mass as f64,
         inertia_axis: mp.inertia.z_axis.z as f64,
@@ -87,7 +92,7 @@ fn release_nut(mu: f32, frames: u32, on_gpu: bool) -> Run {
 #[test]
 fn frictionless_m16_nut_descends_the_helix_at_the_analytic_rate() {
     for on_gpu in [false, true] {
-        let r = release_nut(0.0, 60, on_gpu);
+        let r = release_nut(0.0, 60, on_gpu, 1);
         let k = std::f64::consts::TAU / r.pitch;
         let a = G as f64 * r.mass / (r.mass + r.inertia_axis * k * k);
         let expect = 0.5 * a * r.seconds * r.seconds;
@@ -114,12 +119,18 @@ fn frictionless_m16_nut_descends_the_helix_at_the_analytic_rate() {
 /// (M16: 0.0433 * 0.866 = 0.0375) and turns down the thread when mu is clearly below.
 const LOCKED_DRIFT: f64 = 0.01e-3;
 
+/// Held, the nut must stay within LOCKED_DRIFT at every frame, not only at 1 s. With the paper's 1 substep
+/// and 20 iterations our solver (no warm starting yet) ends each frame with ~1 mm/s of unconverged velocity
+/// and the held nut jitters by up to 18 um inside its 22 um axial play (docs/BENCHMARKS.md); 4 substeps
+/// converge (excursion < 1 um), so this test runs at 4.
+const LOCK_SUBSTEPS: u32 = 4;
+
 #[test]
 fn m16_nut_self_locks_above_the_critical_friction_and_turns_below() {
-    let held = release_nut(0.1, 60, true);
-    eprintln!("mu 0.1: descent {:.5} mm", held.descent * 1e3);
-    assert!(held.descent.abs() < LOCKED_DRIFT, "mu 0.1: the nut moved {} m", held.descent);
-    let free = release_nut(0.01, 60, true);
+    let held = release_nut(0.1, 60, true, LOCK_SUBSTEPS);
+    eprintln!("mu 0.1: descent {:.5} mm, largest excursion {:.5} mm", held.descent * 1e3, held.excursion * 1e3);
+    assert!(held.excursion < LOCKED_DRIFT, "mu 0.1: the nut moved up to {} m", held.excursion);
+    let free = release_nut(0.01, 60, true, LOCK_SUBSTEPS);
     eprintln!("mu 0.01: descent {:.4} mm", free.descent * 1e3);
     // Clearly turning: at least a fifth of the frictionless descent (4.6 mm) and along the thread.
     assert!(free.descent > 0.9e-3 && free.yaw < -0.4, "mu 0.01: descent {} m, yaw {}", free.descent, free.yaw);
