@@ -208,3 +208,86 @@ fn gpu_cpu_parity_on_seeded_triangles() {
         }
     }
 }
+
+/// `n` seeded small triangles scattered in a shell around a sphere of radius `r`: their normals point
+/// everywhere, so every batch opens new patches and a full patch budget evicts in most rounds.
+fn shell_soup(n: u32, r: f32, mut seed: u64) -> Vec<[Vec3; 3]> {
+    let mut rnd = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 40) as f32 / (1u64 << 24) as f32
+    };
+    (0..n)
+        .map(|_| {
+            let d = Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5).normalize_or(Vec3::X);
+            let c = d * (r + (rnd() - 0.6) * 0.01);
+            let mut e = || Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5) * 0.01;
+            let (e0, e1, e2) = (e(), e(), e());
+            [c + e0, c + e1, c + e2]
+        })
+        .collect()
+}
+
+/// lavapipe gives a shader invocation one loop counter for all its loops (65535 back edges); past it every
+/// loop exits after one pass. Jobs of ~180 batches of 64 ran out of it and silently lost ~90% of their
+/// candidates (and 256-wide jobs of 16 batches did on this soup, which evicts patches in most rounds).
+/// The longest job and the most jobs per pair that the config allows must match the CPU twin.
+#[test]
+fn longest_jobs_and_most_jobs_per_pair_lose_no_candidates_to_the_loop_limit() {
+    let r = 0.05;
+    let grid = Arc::new(sphere_grid(r, 48));
+    for (workgroup_size, max_patches) in [(64, 64), (256, 64), (32, 256)] {
+        let base = ContactConfig { workgroup_size, max_patches, ..Default::default() };
+        let longest = base.max_chunk_triangles();
+        let most_jobs = base.max_jobs_per_pair();
+        assert!(longest >= 256 && most_jobs >= 1, "{base:?}");
+        // One job of the longest length; then the most jobs of 256 triangles one merge takes.
+        for (triangles, chunk, jobs) in [(longest, longest, 1), (256 * most_jobs, 256, most_jobs)] {
+            let cfg = ContactConfig { chunk_triangles: chunk, ..base.clone() };
+            let pair = PairSpec {
+                body_a: 0,
+                a_pose: (Vec3::ZERO, Quat::IDENTITY),
+                query: Arc::new(QueryShape { triangles: shell_soup(triangles, r, 0x9E3779B97F4A7C15), radius: 0.0 }),
+                body_b: 1,
+                b_pose: (Vec3::ZERO, Quat::IDENTITY),
+                sdf: SdfShape::Grid(grid.clone()),
+                contact_offset: 0.003,
+                friction: 0.0,
+            };
+            let model = ContactModel { body_count: 2, pairs: vec![pair] };
+            let worlds = 2;
+            let mut poses = Vec::new();
+            for w in 0..worlds {
+                poses.push(TransformGpu::new(
+                    Vec3::new(0.0, 0.0, 0.001 * w as f32),
+                    Quat::from_rotation_z(0.3 * w as f32),
+                ));
+                poses.push(TransformGpu::new(Vec3::ZERO, Quat::IDENTITY));
+            }
+            let g = gpu();
+            let pipe = ContactPipeline::new(g, &model, worlds, &cfg).unwrap();
+            assert_eq!(pipe.flat.jobs.len() as u32, jobs, "{cfg:?}");
+            pipe.write_body_q(g, &poses);
+            pipe.run(g);
+            let (gpu, cpu) = (pipe.read(g), pipe.contacts_cpu(&poses));
+            for w in 0..worlds as usize {
+                let what = format!("{triangles} triangles in {jobs} job(s), {cfg:?}, world {w}");
+                let (gc, cc) = (gpu.candidates[w] as i64, cpu.candidates[w] as i64);
+                assert!(cc as u32 > triangles * 9 / 10 && (gc - cc).abs() <= 2, "{what}: gpu {gc} cpu {cc} candidates");
+                let (gp, cp) = (&gpu.patches[w], &cpu.patches[w]);
+                assert_eq!(gp.len(), cp.len(), "{what}: patch count");
+                let same = |a: &factory_engine::contact::Patch, b: &factory_engine::contact::Patch| {
+                    (a.normal - b.normal).length() < 1e-4
+                        && a.contacts.len() == b.contacts.len()
+                        && a.contacts
+                            .iter()
+                            .zip(&b.contacts)
+                            .all(|(x, y)| (x.point - y.point).length() < 1e-5 && (x.depth - y.depth).abs() < 1e-6)
+                };
+                let mismatched = gp.iter().filter(|a| !cp.iter().any(|b| same(a, b))).count();
+                assert!(mismatched * 10 <= gp.len(), "{what}: {mismatched} of {} patches differ", gp.len());
+            }
+        }
+    }
+}

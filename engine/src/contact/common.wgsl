@@ -5,11 +5,16 @@
 // (deepest, farthest from it, farthest from their line, farthest on the other side: the largest area).
 // Candidates are never written to global memory.
 
-// Workgroup size = candidates per batch (BATCH in reduce.rs must match). 64 made the kernels ~1.7x faster
-// on lavapipe (M16 nut-bolt, 1 world: GPU / CPU-twin time 1.5 -> 0.85) but lost ~90% of the candidates
-// of jobs with ~180 batches (48+ worlds, one 11.5k-triangle job per pair) on lavapipe; back to 256 until
-// that is understood (see the commit that reverted it).
-const WG: u32 = 256u;
+// Workgroup size = candidates per batch, substituted by the host (ContactConfig::workgroup_size: 32, 64,
+// 128 or 256; the CPU twin cuts its batches to the same size).
+//
+// Loops: lavapipe (llvmpipe) gives each shader invocation ONE loop counter shared by all its loops,
+// 65535 back edges in total (LP_MAX_TGSI_LOOP_ITERATIONS); past it every loop exits after one pass and
+// the kernel silently skips work (a 180-batch job lost 90% of its candidates). So the per-batch loops are
+// kept short (Assign unrolled by 4, no per-patch loop on one lane) and the host bounds the batches per
+// workgroup from a worst-case count of these loops (ContactConfig::max_chunk_triangles,
+// max_jobs_per_pair): keep that count in step with every loop added here.
+const WG: u32 = WG_VALUE;
 // Patch budget per pair, substituted by the host when the pipeline is built (16..256).
 const MAX_PATCHES: u32 = MAX_PATCHES_VALUE;
 const PATCH_CAP: u32 = MAX_PATCHES_VALUE + 1u; // + one temporary patch for AddPatch when full
@@ -102,7 +107,7 @@ var<workgroup> patch_area: array<atomic<u32>, PATCH_CAP>;   // member area [area
 var<workgroup> patch_slot: array<vec4<f32>, PATCH_CAP * 4u>;          // 4 per patch: point xyz, depth w
 var<workgroup> patch_key: array<atomic<u32>, PATCH_CAP>;
 var<workgroup> wg_best: array<atomic<u32>, 2>;  // FindDeepest keys, double-buffered by loop parity
-var<workgroup> wg_u32: u32;
+var<workgroup> wg_victim: atomic<u32>; // eviction arg-min key, NONE between evictions
 var<workgroup> patch_count: u32;
 
 fn reset_patches(lid: u32) {
@@ -116,6 +121,7 @@ fn reset_patches(lid: u32) {
         patch_count = 0u;
         atomicStore(&wg_best[0], 0u);
         atomicStore(&wg_best[1], 0u);
+        atomicStore(&wg_victim, NONE);
     }
     workgroupBarrier();
 }
@@ -153,6 +159,17 @@ fn measure(p: u32, offset: f32) -> f32 {
     return f32(atomicLoad(&patch_area[p])) * (offset - patch_slot[p * 4u].w);
 }
 
+// One step of Assign (unrolled by 4 in reduce_batch: see the note on loops at the top).
+fn assign_step(p: u32, pc0: u32, n: vec3<f32>, best: ptr<function, f32>, mine: ptr<function, u32>) {
+    if (p < pc0) {
+        let d = dot(n, patch_n[p].xyz);
+        if (d >= *best) {
+            *best = d;
+            *mine = p;
+        }
+    }
+}
+
 // Key that a valid candidate already binned by Assign posts to wg_best in the first round: below every
 // FindDeepest key (those have ordered(-depth) >= ordered(-offset) > IDX_MASK), so it only tells the
 // workgroup that the batch has members and needs the slot rounds.
@@ -169,7 +186,7 @@ const ASSIGNED_ONLY: u32 = 0x200u;
 //   patch MAX_PATCHES is zeroed after each use), so members can add to it at once;
 // - wg_best is double-buffered: the buffer of round i+1 is zeroed during round i, before the barrier that
 //   ends every read of it from round i-1, so a round costs one workgroupUniformLoad (2 barriers), plus 3
-//   when the budget is full and a victim must be chosen;
+//   when the budget is full and a victim must be chosen (one atomic arg-min over the patches);
 // - each slot round initialises the next round's keys in the region that writes its slots (2 barriers
 //   per round), and a batch whose invocations have no candidate skips the slot rounds.
 fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) -> u32 {
@@ -182,12 +199,11 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
     if (my.w < VALID_BELOW) {
         var best = normal_cos;
         mine = UNASSIGNED;
-        for (var p = 0u; p < pc0; p++) {
-            let d = dot(my_n.xyz, patch_n[p].xyz);
-            if (d >= best) {
-                best = d;
-                mine = p;
-            }
+        for (var p = 0u; p < pc0; p += 4u) {
+            assign_step(p, pc0, my_n.xyz, &best, &mine);
+            assign_step(p + 1u, pc0, my_n.xyz, &best, &mine);
+            assign_step(p + 2u, pc0, my_n.xyz, &best, &mine);
+            assign_step(p + 3u, pc0, my_n.xyz, &best, &mine);
         }
         if (mine != UNASSIGNED) {
             atomicAdd(&patch_area[mine], units);
@@ -223,9 +239,9 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
         if (lid == 0u) {
             patch_n[idx] = vec4<f32>(seed_n, 0.0);
             patch_slot[idx * 4u] = cand_pd[seed];
-            for (var s = 1u; s < 4u; s++) {
-                patch_slot[idx * 4u + s] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
-            }
+            patch_slot[idx * 4u + 1u] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
+            patch_slot[idx * 4u + 2u] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
+            patch_slot[idx * 4u + 3u] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
         }
         if (mine == UNASSIGNED && dot(my_n.xyz, seed_n) >= normal_cos) {
             mine = idx;
@@ -234,31 +250,29 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
         if (idx < MAX_PATCHES) {
             pc = idx + 1u;
         } else {
-            // Budget full: the new patch replaces the existing one of lowest measure if it measures more.
-            workgroupBarrier();
+            // Budget full: of the existing patches and the new one (index MAX_PATCHES), the one of least
+            // measure goes: one atomic arg-min over keys ordered(measure) | code, code p + 1 for an existing
+            // patch (the lowest index wins a tie) and 0 for the new one (it loses ties: it replaces a patch
+            // only when it measures more).
+            workgroupBarrier(); // members' areas added
+            for (var p = lid; p <= MAX_PATCHES; p += WG) {
+                atomicMin(&wg_victim, ordered(measure(p, offset)) | select(p + 1u, 0u, p == MAX_PATCHES));
+            }
+            let code = workgroupUniformLoad(&wg_victim) & IDX_MASK;
+            let victim = select(NONE, code - 1u, code != 0u);
+            // Lane 0 moves the patch; the next reads of the patch list follow the next round's barrier.
             if (lid == 0u) {
-                var victim = 0u;
-                var lowest = measure(0u, offset);
-                for (var p = 1u; p < MAX_PATCHES; p++) {
-                    let m = measure(p, offset);
-                    if (m < lowest) {
-                        lowest = m;
-                        victim = p;
-                    }
-                }
-                if (measure(MAX_PATCHES, offset) > lowest) {
+                if (victim != NONE) {
                     patch_n[victim] = patch_n[MAX_PATCHES];
                     atomicStore(&patch_area[victim], atomicLoad(&patch_area[MAX_PATCHES]));
-                    for (var s = 0u; s < 4u; s++) {
-                        patch_slot[victim * 4u + s] = patch_slot[MAX_PATCHES * 4u + s];
-                    }
-                    wg_u32 = victim;
-                } else {
-                    wg_u32 = NONE;
+                    patch_slot[victim * 4u] = patch_slot[MAX_PATCHES * 4u];
+                    patch_slot[victim * 4u + 1u] = patch_slot[MAX_PATCHES * 4u + 1u];
+                    patch_slot[victim * 4u + 2u] = patch_slot[MAX_PATCHES * 4u + 2u];
+                    patch_slot[victim * 4u + 3u] = patch_slot[MAX_PATCHES * 4u + 3u];
                 }
                 atomicStore(&patch_area[MAX_PATCHES], 0u);
+                atomicStore(&wg_victim, NONE);
             }
-            let victim = workgroupUniformLoad(&wg_u32);
             if (mine == MAX_PATCHES) {
                 mine = victim;
             } else if (mine == victim) {

@@ -1,7 +1,7 @@
 //! Contact generation kernel (generate.wgsl): pipeline, dispatch, and its CPU twin [`generate_cpu`].
 
 use super::model::{FlatModel, JobGpu, PairGpu, ParamsGpu, PatchGpu, EMPTY_DEPTH};
-use super::reduce::{Candidate, Reducer, BATCH};
+use super::reduce::{Candidate, Reducer};
 use super::ContactConfig;
 use glam::{Vec3, Vec4};
 
@@ -9,9 +9,18 @@ pub(crate) const COMMON_WGSL: &str = include_str!("common.wgsl");
 pub(crate) const GENERATE_WGSL: &str =
     concat!(include_str!("generate.wgsl"), include_str!("sdf_sample.wgsl"), include_str!("../sdf/thread.wgsl"));
 
-/// The WGSL module of a kernel with the patch budget substituted.
+/// The WGSL module of a kernel with the patch budget substituted and the default workgroup size (for
+/// kernels that do not reduce: normals, solver).
 pub fn shader_source(kernel_wgsl: &str, max_patches: u32) -> String {
-    format!("{}\n{}", COMMON_WGSL.replace("MAX_PATCHES_VALUE", &format!("{max_patches}u")), kernel_wgsl)
+    shader_source_wg(kernel_wgsl, max_patches, ContactConfig::default().workgroup_size)
+}
+
+/// The WGSL module of a kernel with the patch budget and the reduction's workgroup size substituted.
+pub fn shader_source_wg(kernel_wgsl: &str, max_patches: u32, workgroup_size: u32) -> String {
+    let common = COMMON_WGSL
+        .replace("MAX_PATCHES_VALUE", &format!("{max_patches}u"))
+        .replace("WG_VALUE", &format!("{workgroup_size}u"));
+    format!("{common}\n{kernel_wgsl}")
 }
 
 /// Builds a compute pipeline from WGSL with an automatic layout.
@@ -56,7 +65,7 @@ impl GenerateKernel {
             pipeline: compute_pipeline(
                 device,
                 "contact-generate",
-                &shader_source(GENERATE_WGSL, cfg.max_patches),
+                &shader_source_wg(GENERATE_WGSL, cfg.max_patches, cfg.workgroup_size),
                 "generate",
             ),
         }
@@ -253,7 +262,7 @@ pub fn generate_job_cpu(
     let mut found = 0;
     let mut base = 0;
     while base < job.tri_count {
-        let n = (job.tri_count - base).min(BATCH as u32);
+        let n = (job.tri_count - base).min(cfg.workgroup_size);
         let cands: Vec<Candidate> = (0..n)
             .map(|t| {
                 let v = ((job.tri_first + base + t) * 3) as usize;
@@ -263,7 +272,7 @@ pub fn generate_job_cpu(
             .collect();
         found += cands.iter().filter(|c| c.pd.w < 1e38).count() as u32;
         red.reduce_batch(&cands, cfg.normal_cos, pair.contact_offset, pair.min_separation);
-        base += BATCH as u32;
+        base += cfg.workgroup_size;
     }
     let patches = red
         .patches(pair.area_unit)

@@ -96,7 +96,7 @@ fn minimise_on_triangle(pair: Pair, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>, it
     return Candidate(x, s);
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WG)
 fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
     let job_index = wid.x;
     let world = wid.y + params.world_offset;

@@ -1,8 +1,8 @@
 //! Patch merge kernel (merge.wgsl): combines a pair's per-job patches; CPU twin [`merge_cpu`].
 
-use super::generate::{compute_pipeline, dispatch_compute, shader_source};
+use super::generate::{compute_pipeline, dispatch_compute, shader_source_wg};
 use super::model::{PairGpu, PatchGpu};
-use super::reduce::{Candidate, Reducer, BATCH};
+use super::reduce::{Candidate, Reducer};
 use super::ContactConfig;
 use glam::Vec4;
 
@@ -16,7 +16,12 @@ pub struct MergeKernel {
 impl MergeKernel {
     pub fn new(device: &wgpu::Device, cfg: &ContactConfig) -> Self {
         MergeKernel {
-            pipeline: compute_pipeline(device, "contact-merge", &shader_source(MERGE_WGSL, cfg.max_patches), "merge"),
+            pipeline: compute_pipeline(
+                device,
+                "contact-merge",
+                &shader_source_wg(MERGE_WGSL, cfg.max_patches, cfg.workgroup_size),
+                "merge",
+            ),
         }
     }
 
@@ -35,7 +40,7 @@ impl MergeKernel {
 /// CPU twin of one merge workgroup: the pair's job outputs in job order.
 pub fn merge_cpu(pair: &PairGpu, job_patches: &[&[PatchGpu]], cfg: &ContactConfig) -> Vec<PatchGpu> {
     let mut red = Reducer::new(cfg.max_patches);
-    // All jobs' slots as one stream cut into batches of BATCH, as merge.wgsl does.
+    // All jobs' slots as one stream cut into batches of the workgroup size, as merge.wgsl does.
     let stream: Vec<Candidate> = job_patches
         .iter()
         .flat_map(|patches| patches.iter())
@@ -53,8 +58,35 @@ pub fn merge_cpu(pair: &PairGpu, job_patches: &[&[PatchGpu]], cfg: &ContactConfi
             })
         })
         .collect();
-    for batch in stream.chunks(BATCH) {
+    for batch in stream.chunks(cfg.workgroup_size as usize) {
         red.reduce_batch(batch, cfg.normal_cos, pair.contact_offset, pair.min_separation);
     }
     red.patches(pair.area_unit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::generate::{shader_source_wg, GENERATE_WGSL};
+    use super::MERGE_WGSL;
+
+    /// The reducing kernels validate with naga at every workgroup size and patch budget.
+    #[test]
+    fn reducing_kernels_validate_at_every_workgroup_size() {
+        for wg in [32, 64, 128, 256] {
+            for max_patches in [16, 64, 256] {
+                for (name, wgsl) in [("generate", GENERATE_WGSL), ("merge", MERGE_WGSL)] {
+                    let src = shader_source_wg(wgsl, max_patches, wg);
+                    let module = naga::front::wgsl::parse_str(&src)
+                        .unwrap_or_else(|e| panic!("{name} wg {wg}: {}", e.emit_to_string(&src)));
+                    naga::valid::Validator::new(
+                        naga::valid::ValidationFlags::all(),
+                        naga::valid::Capabilities::empty(),
+                    )
+                    .validate(&module)
+                    .unwrap_or_else(|e| panic!("{name} wg {wg} max_patches {max_patches}: {e:?}"));
+                    assert_eq!(module.entry_points[0].workgroup_size, [wg, 1, 1], "{name}");
+                }
+            }
+        }
+    }
 }

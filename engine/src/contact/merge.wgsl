@@ -9,7 +9,7 @@
 @group(2) @binding(0) var<storage, read_write> patches: array<PatchOut>;
 @group(2) @binding(1) var<storage, read_write> patch_counts: array<u32>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WG)
 fn merge(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
     let pair_index = wid.x;
     let world = wid.y + params.world_offset;

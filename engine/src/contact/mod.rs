@@ -40,16 +40,93 @@ pub struct ContactConfig {
     /// Projected-gradient iterations per triangle.
     pub iterations: u32,
     /// Query triangles per generation workgroup; 0 picks a value from the world count at build time.
+    /// At most [`max_chunk_triangles`](Self::max_chunk_triangles).
     pub chunk_triangles: u32,
+    /// Invocations per workgroup of the generate and merge kernels = candidates per reduction batch
+    /// (32, 64, 128 or 256); the CPU twin cuts its batches to the same size.
+    pub workgroup_size: u32,
 }
 
 impl Default for ContactConfig {
     fn default() -> Self {
-        ContactConfig { max_patches: 64, normal_cos: 10f32.to_radians().cos(), iterations: 12, chunk_triangles: 0 }
+        ContactConfig {
+            max_patches: 64,
+            normal_cos: 10f32.to_radians().cos(),
+            iterations: 12,
+            chunk_triangles: 0,
+            workgroup_size: 256,
+        }
     }
 }
 
+/// Loop iterations a lavapipe (llvmpipe) shader invocation may run in total: one counter shared by all
+/// the loops of the invocation, decremented on every back edge; once spent, every loop exits after one
+/// pass and the kernel silently skips work (Mesa's `LP_MAX_TGSI_LOOP_ITERATIONS`).
+pub const LOOP_ITERATION_LIMIT: u32 = 65535;
+
+/// The share of [`LOOP_ITERATION_LIMIT`] the contact kernels plan for (the counts below are upper bounds;
+/// the rest is slack for loops a compiler might add).
+const LOOP_BUDGET: u32 = LOOP_ITERATION_LIMIT / 8 * 7;
+
 impl ContactConfig {
+    /// `for (var p = lid; p < n; p += WG)`: its iterations plus the final test (llvmpipe counts a loop of
+    /// n passes as n + 1 back edges, and one for a loop that runs no pass).
+    fn strided(&self, n: u32) -> u32 {
+        n.div_ceil(self.workgroup_size) + 1
+    }
+
+    /// Worst-case loop back edges of one `reduce_batch` (common.wgsl) per invocation: Assign (unrolled by
+    /// 4), at most one new-patch round per candidate plus the last, each with the eviction's strided
+    /// arg-min, the slot keys' init and 4 slot rounds with their strided writes.
+    fn reduce_batch_loops(&self) -> u32 {
+        let assign = self.max_patches.div_ceil(4) + 1;
+        let rounds = (self.workgroup_size + 1) * (1 + self.strided(self.max_patches + 1));
+        let slots = self.strided(self.max_patches) + 5 + 4 * self.strided(self.max_patches);
+        assign + rounds + slots
+    }
+
+    /// Once per workgroup: reset_patches and the output loop, each with a 4-slot loop per patch.
+    fn patch_list_loops(&self) -> u32 {
+        2 * self.strided(self.max_patches + 1) * 5
+    }
+
+    /// Worst-case loop back edges of one generate workgroup (generate.wgsl) over a job of `triangles`.
+    pub fn generate_loop_iterations(&self, triangles: u32) -> u64 {
+        // Per batch: the batch loop, the projected-gradient loop and its 3 corners, the reduction.
+        let per_batch = 1 + (self.iterations + 1) + 4 + self.reduce_batch_loops();
+        triangles.div_ceil(self.workgroup_size) as u64 * per_batch as u64 + self.patch_list_loops() as u64 + 1
+    }
+
+    /// Worst-case loop back edges of one merge workgroup (merge.wgsl) over a pair of `jobs` jobs.
+    pub fn merge_loop_iterations(&self, jobs: u32) -> u64 {
+        // The stream holds at most 4 slots per patch of every job; per batch: the batch loop, the search
+        // of its first job, each invocation's walk to its job (a batch spans at most WG / 4 + 1 jobs that
+        // hold slots, plus the empty ones between them, counted once below), the 4-slot count, the
+        // reduction.
+        let batches = (jobs as u64 * self.max_patches as u64 * 4).div_ceil(self.workgroup_size as u64);
+        let per_batch = 1 + 1 + (self.workgroup_size / 4 + 2) + 5 + self.reduce_batch_loops();
+        batches * per_batch as u64 + 3 * (jobs as u64 + 1) + self.patch_list_loops() as u64
+    }
+
+    /// The longest job (query triangles per generate workgroup, a multiple of 256) whose worst-case loop
+    /// count stays within lavapipe's limit (see [`LOOP_ITERATION_LIMIT`]); 0 if not even 256 fit.
+    pub fn max_chunk_triangles(&self) -> u32 {
+        let mut chunk = 0;
+        while chunk < (1 << 20) && self.generate_loop_iterations(chunk + 256) <= LOOP_BUDGET as u64 {
+            chunk += 256;
+        }
+        chunk
+    }
+
+    /// The most jobs per pair one merge workgroup can take within lavapipe's loop limit.
+    pub fn max_jobs_per_pair(&self) -> u32 {
+        let mut jobs = 0;
+        while jobs < (1 << 20) && self.merge_loop_iterations(jobs + 1) <= LOOP_BUDGET as u64 {
+            jobs += 1;
+        }
+        jobs
+    }
+
     /// Refuses out-of-range values, naming the field.
     pub fn validate(&self) -> Result<()> {
         if !(16..=256).contains(&self.max_patches) {
@@ -80,13 +157,40 @@ impl ContactConfig {
                 expected: "0 (automatic) or a multiple of 256".into(),
             });
         }
+        if ![32, 64, 128, 256].contains(&self.workgroup_size) {
+            return Err(EngineError::Config {
+                field: "workgroup_size",
+                value: self.workgroup_size.to_string(),
+                expected: "32, 64, 128 or 256".into(),
+            });
+        }
+        let max_chunk = self.max_chunk_triangles();
+        if max_chunk == 0 || self.max_jobs_per_pair() == 0 {
+            return Err(EngineError::Config {
+                field: "iterations",
+                value: self.iterations.to_string(),
+                expected: "fewer iterations, a smaller max_patches or workgroup_size: one batch exceeds the kernels' loop budget".into(),
+            });
+        }
+        if self.chunk_triangles > max_chunk {
+            return Err(EngineError::Config {
+                field: "chunk_triangles",
+                value: self.chunk_triangles.to_string(),
+                expected: format!(
+                    "at most {max_chunk} with these settings (lavapipe ends a shader's loops after {LOOP_ITERATION_LIMIT} iterations in all)"
+                ),
+            });
+        }
         Ok(())
     }
 
-    /// Bytes of workgroup memory the kernels need for this patch budget (see common.wgsl).
+    /// Bytes of workgroup memory the generate and merge kernels declare (common.wgsl): the batch
+    /// (`cand_pd`, `cand_n`: 2 x 16 bytes per invocation), the patch list (`patch_n` 16, `patch_area` 4,
+    /// `patch_slot` 4 x 16, `patch_key` 4 bytes per patch, budget + 1 patches) and `wg_best`, `wg_u32`,
+    /// `patch_count` (16 bytes).
     pub fn workgroup_bytes(&self) -> u32 {
         let cap = self.max_patches + 1;
-        256 * 16 * 2 + 256 * 4 + cap * (16 + 4 + 4 * 16 + 4) + 12
+        self.workgroup_size * 16 * 2 + cap * (16 + 4 + 4 * 16 + 4) + 16
     }
 }
 
@@ -157,6 +261,22 @@ mod tests {
         // The budget of 256 patches fits the 32 KiB of workgroup memory most GPUs offer.
         assert!(ContactConfig { max_patches: 256, ..Default::default() }.workgroup_bytes() <= 32768);
         assert!(ContactConfig::default().workgroup_bytes() <= 16384);
+        let e = ContactConfig { workgroup_size: 96, ..Default::default() }.validate().unwrap_err().to_string();
+        assert!(e.contains("workgroup_size"), "{e}");
+        for wg in [32, 64, 128, 256] {
+            for max_patches in [16, 64, 256] {
+                let c = ContactConfig { workgroup_size: wg, max_patches, ..Default::default() };
+                assert!(c.validate().is_ok(), "{c:?}");
+                // With budgets up to the default, our M16 and Factory's M16 nut (11512, 15078 triangles)
+                // fit one merge workgroup (a budget of 256 at 32 wide takes 10752 triangles per pair).
+                let per_pair = c.max_chunk_triangles() as u64 * c.max_jobs_per_pair() as u64;
+                assert!(max_patches > 64 || per_pair >= 15078, "{c:?}");
+                assert!(per_pair >= 10752, "{c:?}");
+            }
+        }
+        let c = ContactConfig::default();
+        let e = ContactConfig { chunk_triangles: c.max_chunk_triangles() + 256, ..c.clone() }.validate().unwrap_err();
+        assert!(e.to_string().contains("chunk_triangles"), "{e}");
     }
 }
 #[cfg(test)]

@@ -112,9 +112,31 @@ impl ContactPipeline {
                 expected: format!("1..={}", limits.max_compute_workgroups_per_dimension),
             });
         }
-        let chunk =
-            if cfg.chunk_triangles == 0 { auto_chunk(model.max_triangles(), world_count) } else { cfg.chunk_triangles };
+        // Jobs short enough for one generate workgroup and few enough per pair for one merge workgroup
+        // within lavapipe's loop limit (see ContactConfig::max_chunk_triangles); the CPU twin uses the
+        // same jobs.
+        let max_jobs = cfg.max_jobs_per_pair();
+        let chunk = if cfg.chunk_triangles == 0 {
+            let longest = model.max_triangles();
+            let fewest_jobs = longest.div_ceil(max_jobs).next_multiple_of(256);
+            auto_chunk(longest, world_count).min(cfg.max_chunk_triangles()).max(fewest_jobs)
+        } else {
+            cfg.chunk_triangles
+        };
         let flat = model.flatten(chunk)?;
+        let too_many_jobs = flat.pairs.iter().find(|p| p.job_count > max_jobs);
+        if chunk > cfg.max_chunk_triangles() || too_many_jobs.is_some() {
+            let triangles = too_many_jobs.map_or(model.max_triangles(), |p| p.tri_count);
+            return Err(EngineError::Config {
+                field: "chunk_triangles",
+                value: chunk.to_string(),
+                expected: format!(
+                    "jobs of at most {} triangles and at most {max_jobs} jobs per pair with these settings (lavapipe's loop limit; a pair has {} query triangles): use fewer triangles per pair, a smaller max_patches or a larger workgroup_size",
+                    cfg.max_chunk_triangles(),
+                    triangles
+                ),
+            });
+        }
         for (what, bytes) in
             [("SDF values", flat.sdf_values.len() as u64 * 4), ("query triangles", flat.tri_verts.len() as u64 * 16)]
         {

@@ -5,8 +5,10 @@
 use super::model::{PatchGpu, EMPTY_DEPTH};
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
-/// Candidates per batch: the workgroup size of the kernels (`WG` in common.wgsl; see the note there).
-pub const BATCH: usize = 256;
+/// Most candidates per batch: the largest workgroup size of the kernels (`WG` in common.wgsl, set by
+/// `ContactConfig::workgroup_size`; the callers cut batches of that size). Candidate codes `i + 1` must
+/// fit `IDX_MASK`.
+pub const MAX_BATCH: usize = 256;
 const VALID_BELOW: f32 = 1.0e38;
 const NEG_INF: f32 = -3.0e38;
 const IDX_MASK: u32 = 0x3ff;
@@ -98,9 +100,9 @@ impl Reducer {
         }
     }
 
-    /// Reduces one batch (at most [`BATCH`] candidates, slot i = invocation i).
+    /// Reduces one batch (at most [`MAX_BATCH`] candidates, slot i = invocation i).
     pub fn reduce_batch(&mut self, cand: &[Candidate], normal_cos: f32, offset: f32, min_sep: f32) {
-        assert!(cand.len() <= BATCH);
+        assert!(cand.len() <= MAX_BATCH);
         let mut patch = vec![NONE; cand.len()];
         // Assign.
         for (i, c) in cand.iter().enumerate() {
@@ -150,20 +152,22 @@ impl Reducer {
             if idx < self.max_patches {
                 self.count = idx + 1;
             } else {
-                let mut victim = 0;
-                let mut lowest = self.measure(0, offset);
-                for p in 1..self.max_patches {
-                    let m = self.measure(p, offset);
-                    if m < lowest {
-                        lowest = m;
-                        victim = p;
-                    }
-                }
-                let victim = if self.measure(self.max_patches, offset) > lowest {
-                    self.normal[victim] = self.normal[self.max_patches];
-                    self.area[victim] = self.area[self.max_patches];
-                    self.slots[victim] = self.slots[self.max_patches];
-                    victim as u32
+                // The arg-min of ordered(measure) | code: code p + 1 for existing patches, 0 for the new one
+                // (index max_patches), which thus loses ties.
+                let key = (0..=self.max_patches)
+                    .map(|p| {
+                        let code = if p == self.max_patches { 0 } else { p as u32 + 1 };
+                        ordered(self.measure(p, offset)) | code
+                    })
+                    .min()
+                    .unwrap();
+                let code = key & IDX_MASK;
+                let victim = if code != 0 {
+                    let v = (code - 1) as usize;
+                    self.normal[v] = self.normal[self.max_patches];
+                    self.area[v] = self.area[self.max_patches];
+                    self.slots[v] = self.slots[self.max_patches];
+                    v as u32
                 } else {
                     NONE
                 };
@@ -246,7 +250,7 @@ mod tests {
                 cands.push(Candidate { pd: Vec4::new(0.0, u, 1.0 + v, -0.02), n: Vec4::new(1.0, 0.0, 0.0, 1.0) });
             }
         }
-        assert!(cands.len() <= BATCH);
+        assert!(cands.len() <= MAX_BATCH);
         let mut r = Reducer::new(16);
         r.reduce_batch(&cands, 0.9, 0.05, 0.01);
         let p = r.patches(1.0);
@@ -281,7 +285,7 @@ mod tests {
             }
         }
         let mut r = Reducer::new(16);
-        for chunk in cands.chunks(BATCH) {
+        for chunk in cands.chunks(MAX_BATCH) {
             r.reduce_batch(chunk, 0.999, 0.01, 1e-4);
         }
         assert_eq!(r.count(), 16);
