@@ -227,7 +227,7 @@ pub fn triangle_candidate_cpu(pair: &PairGpu, sdf: &[u32], a: Vec3, b: Vec3, c: 
     }
     let n = g / glen;
     let area = 0.5 * (b - a).cross(c - a).length();
-    let units = ((area / pair.area_unit).round() as u32).max(1);
+    let units = ((area / pair.area_unit).round_ties_even() as u32).max(1);
     Candidate { pd: (x - pair.radius * n).extend(depth), n: n.extend(units as f32) }
 }
 

@@ -53,7 +53,7 @@ pub fn merge_cpu(pair: &PairGpu, job_patches: &[&[PatchGpu]], cfg: &ContactConfi
                 let units = p.normal[3] / (used as f32 * pair.area_unit);
                 Candidate {
                     pd: Vec4::from_array(sl),
-                    n: Vec4::new(p.normal[0], p.normal[1], p.normal[2], (units.round() as u32).max(1) as f32),
+                    n: Vec4::new(p.normal[0], p.normal[1], p.normal[2], (units.round_ties_even() as u32).max(1) as f32),
                 }
             })
         })
