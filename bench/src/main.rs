@@ -135,10 +135,26 @@ enum Cmd {
 
 fn main() -> Result<()> {
     match Cli::parse().cmd {
-        Cmd::Scene { name: SceneName::NutBolt, worlds, seconds, dt, substeps, pos_iters, vel_iters, sdf_res, patches, mu, size, fit, json } => {
+        Cmd::Scene {
+            name: SceneName::NutBolt,
+            worlds,
+            seconds,
+            dt,
+            substeps,
+            pos_iters,
+            vel_iters,
+            sdf_res,
+            patches,
+            mu,
+            size,
+            fit,
+            json,
+        } => {
             let sdf_resolution = match sdf_res.as_str() {
                 "analytic" => None,
-                r => Some(r.parse::<u32>().map_err(|_| anyhow::anyhow!("--sdf-res {r:?}: valid values are `analytic` or a grid resolution such as 256"))?),
+                r => Some(r.parse::<u32>().map_err(|_| {
+                    anyhow::anyhow!("--sdf-res {r:?}: valid values are `analytic` or a grid resolution such as 256")
+                })?),
             };
             let run = factory_bench::scene::NutBoltRun {
                 size: size.parse().map_err(|e| anyhow::anyhow!("--size: {e}"))?,
@@ -147,7 +163,13 @@ fn main() -> Result<()> {
                 seconds,
                 sdf_resolution,
                 contact: ContactConfig { max_patches: patches, ..Default::default() },
-                solver: factory_engine::solver::SolverConfig { dt, substeps, pos_iters, vel_iters, ..Default::default() },
+                solver: factory_engine::solver::SolverConfig {
+                    dt,
+                    substeps,
+                    pos_iters,
+                    vel_iters,
+                    ..Default::default()
+                },
                 mu,
                 contact_offset: 1e-3,
             };

@@ -205,3 +205,19 @@ fn bad_settings_are_refused_naming_the_field() {
     let e = GpuSolver::new(g, &pipe, &bodies, &SolverConfig::default()).err().expect("refused").to_string();
     assert!(e.contains("mass"), "{e}");
 }
+
+/// lavapipe cuts every loop short once an invocation has made 65535 loop passes: the solver refuses a
+/// step that could exceed that on a software adapter instead of silently truncating it.
+#[test]
+fn a_step_beyond_lavapipes_loop_budget_is_refused() {
+    let g = gpu();
+    if !g.is_software() {
+        return;
+    }
+    let (contacts, bodies) = scene(0.5);
+    let pipe = ContactPipeline::new(g, &contacts, 1, &ContactConfig::default()).unwrap();
+    let too_many = SolverConfig { substeps: 64, pos_iters: 20, ..Default::default() };
+    let e = GpuSolver::new(g, &pipe, &bodies, &too_many).err().expect("refused").to_string();
+    assert!(e.contains("loop") && e.contains("substeps"), "{e}");
+    assert!(GpuSolver::new(g, &pipe, &bodies, &SolverConfig { substeps: 4, ..Default::default() }).is_ok());
+}

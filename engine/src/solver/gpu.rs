@@ -117,6 +117,25 @@ impl GpuSolver {
         let world_count = contacts.world_count;
         let pair_count = contacts.flat.pairs.len() as u32;
         let max_rows = (pair_count * contacts.cfg.max_patches * 4).max(1);
+        // llvmpipe (lavapipe) gives each invocation one budget of 65535 loop passes shared by all its loops
+        // and silently cuts every loop short beyond it (see ContactConfig::max_chunk_triangles); refuse a
+        // step that could exceed 7/8 of it there rather than return a truncated solve.
+        if gpu.is_software() {
+            // Rows are built one per loop pass (over patch slots) and swept four per pass (solver.wgsl).
+            let passes = (max_rows + max_rows.div_ceil(4) + pair_count) as u64
+                + model.body_count() as u64
+                + cfg.substeps as u64
+                    * ((cfg.pos_iters + cfg.vel_iters) as u64 * (max_rows.div_ceil(4) as u64 + 1)
+                        + 3 * model.body_count() as u64);
+            let budget = 65535 * 7 / 8;
+            if passes > budget {
+                return Err(EngineError::Config {
+                    field: "substeps x (pos_iters + vel_iters) x contacts",
+                    value: format!("{} x ({} + {}) x {max_rows} = {passes} loop passes", cfg.substeps, cfg.pos_iters, cfg.vel_iters),
+                    expected: format!("at most {budget} on a software adapter (llvmpipe's loop limit); use fewer substeps or iterations, or a smaller max_patches"),
+                });
+            }
+        }
         let params = SolverParamsGpu {
             world_count,
             body_count: contacts.body_count,
