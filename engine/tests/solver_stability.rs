@@ -352,16 +352,12 @@ fn a_closed_frictionless_system_gains_less_than_1_percent_energy_over_10_s() {
 }
 
 /// The same drop with a contact offset large enough to cover a frame's fall (30 mm, so contacts are
-/// speculative before the impact). The plane pair gives one patch (one normal) of at most 4 contacts, and the
-/// reduction chooses slots 2-4 by distance from the deepest contact, not by depth: the box's top corners,
-/// 21 mm above the table but within the 30 mm offset, win over the other bottom corners. The box then
-/// rests on two corners of one bottom edge, rocks across them frame by frame and ends 3.07 mm below its
-/// resting height (lowest corner 7.1 mm inside the table) with the energy at -101%; measured on the GPU
-/// solver and the CPU reference alike.
+/// speculative before the impact). Regression: the plane pair gives one patch (one normal) of at most 4
+/// contacts, and the reduction used to choose slots 2-4 by distance from the deepest contact alone: the
+/// box's top corners, 21 mm above the table but within the offset, won over the other bottom corners and the
+/// box settled 3.07 mm sunk (corner 7.1 mm into the table, energy -101%). Slots 2-4 now skip contacts far
+/// above both the deepest one and the surface (DEPTH_BAND in common.wgsl).
 #[test]
-#[ignore = "contact reduction (merge/reduce, not the solver): with contact_offset 30 mm the table patch's 4 \
-            slots go to the deepest point and the farthest points (the box's top corners, +21 mm), not to the \
-            other bottom corners; the dropped box settles 3.07 mm sunk (corner 7.1 mm into the table)"]
 fn a_box_dropped_with_a_large_contact_offset_lands_on_the_table() {
     let h = Vec3::new(0.02, 0.015, 0.01);
     for on_gpu in [true, false] {

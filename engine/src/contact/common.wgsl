@@ -24,6 +24,9 @@ const EMPTY: f32 = 3.0e38;   // depth of an empty slot / no candidate
 const VALID_BELOW: f32 = 1.0e38;
 const NEG_INF: f32 = -3.0e38;
 const IDX_MASK: u32 = 0x3ffu;
+// Slots 1-3 of a patch take no contact more than this fraction of the contact offset above both its
+// deepest contact and the surface.
+const DEPTH_BAND: f32 = 0.25;
 
 struct Params {
     world_count: u32,
@@ -127,11 +130,19 @@ fn reset_patches(lid: u32) {
 }
 
 // Metric that slot k maximises for a contact at x; NEG_INF when not eligible.
-fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32) -> f32 {
+// Slots 1-3 take no contact more than `band` above both the deepest one and the surface (every
+// penetrating contact stays eligible): a patch's normal bin can hold
+// points far from touching (a box face's far corners at a large contact offset), which would spread the
+// patch over contacts that carry no load now (the paper's measure "prioritizes contacts with high
+// penetration depth").
+fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32, band: f32) -> f32 {
     if (k == 0u) {
         return -depth;
     }
     let s0 = patch_slot[p * 4u];
+    if (depth > max(s0.w, 0.0) + band) {
+        return NEG_INF;
+    }
     if (k == 1u) {
         let d = distance(x, s0.xyz);
         return select(NEG_INF, d, d > min_sep);
@@ -287,26 +298,32 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
         return pc; // no candidate in the batch: the slot rounds would change nothing
     }
     // Slots: 4 rounds, each an atomic arg-max per patch over the current slot and this batch's members.
+    let band = DEPTH_BAND * offset;
     // The patches written above are visible: the last workgroupUniformLoad of the loop was a barrier.
     for (var p = lid; p < pc; p += WG) {
-        atomicStore(&patch_key[p], slot_key(0u, p, min_sep));
+        atomicStore(&patch_key[p], slot_key(0u, p, min_sep, band));
     }
     for (var k = 0u; k < 4u; k++) {
         workgroupBarrier();
         if (mine < MAX_PATCHES) {
-            let m = slot_metric(k, mine, my.xyz, my.w, min_sep);
+            let m = slot_metric(k, mine, my.xyz, my.w, min_sep, band);
             if (m > NEG_INF) {
                 atomicMax(&patch_key[mine], ordered(m) | (lid + 1u));
             }
         }
         workgroupBarrier();
         for (var p = lid; p < pc; p += WG) {
-            let code = atomicLoad(&patch_key[p]) & IDX_MASK;
+            let key = atomicLoad(&patch_key[p]);
+            let code = key & IDX_MASK;
             if (code != 0u) {
                 patch_slot[p * 4u + k] = cand_pd[code - 1u];
+            } else if (key == 0u && k > 0u) {
+                // Neither the current contact (no longer eligible: too close to or far above the new
+                // deepest) nor a candidate qualifies: the slot empties.
+                patch_slot[p * 4u + k] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
             }
             if (k < 3u) {
-                atomicStore(&patch_key[p], slot_key(k + 1u, p, min_sep));
+                atomicStore(&patch_key[p], slot_key(k + 1u, p, min_sep, band));
             }
         }
     }
@@ -315,10 +332,10 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
 }
 
 // Initial key of slot k of patch p: its current contact's metric, 0 when empty or not eligible.
-fn slot_key(k: u32, p: u32, min_sep: f32) -> u32 {
+fn slot_key(k: u32, p: u32, min_sep: f32, band: f32) -> u32 {
     let s = patch_slot[p * 4u + k];
     if (s.w < VALID_BELOW) {
-        let m = slot_metric(k, p, s.xyz, s.w, min_sep);
+        let m = slot_metric(k, p, s.xyz, s.w, min_sep, band);
         if (m > NEG_INF) {
             return ordered(m);
         }

@@ -12,6 +12,9 @@ pub const MAX_BATCH: usize = 256;
 const VALID_BELOW: f32 = 1.0e38;
 const NEG_INF: f32 = -3.0e38;
 const IDX_MASK: u32 = 0x3ff;
+/// Slots 1-3 of a patch take no contact more than this fraction of the contact offset above both its
+/// deepest contact and the surface (as `DEPTH_BAND` in common.wgsl).
+pub const DEPTH_BAND: f32 = 0.25;
 const UNASSIGNED: u32 = u32::MAX - 1;
 const NONE: u32 = u32::MAX;
 
@@ -68,11 +71,14 @@ impl Reducer {
         self.area[p] as f32 * (offset - self.slots[p][0].w)
     }
 
-    fn slot_metric(&self, k: usize, p: usize, x: Vec3, depth: f32, min_sep: f32) -> f32 {
+    fn slot_metric(&self, k: usize, p: usize, x: Vec3, depth: f32, min_sep: f32, band: f32) -> f32 {
         if k == 0 {
             return -depth;
         }
         let s0 = self.slots[p][0];
+        if depth > s0.w.max(0.0) + band {
+            return NEG_INF;
+        }
         if k == 1 {
             let d = x.distance(s0.xyz());
             return if d > min_sep { d } else { NEG_INF };
@@ -181,12 +187,13 @@ impl Reducer {
             }
         }
         // Four arg-max rounds choose the slots.
+        let band = DEPTH_BAND * offset;
         for k in 0..4 {
             let mut key: Vec<u32> = (0..self.count)
                 .map(|p| {
                     let s = self.slots[p][k];
                     if s.w < VALID_BELOW {
-                        let m = self.slot_metric(k, p, s.xyz(), s.w, min_sep);
+                        let m = self.slot_metric(k, p, s.xyz(), s.w, min_sep, band);
                         if m > NEG_INF {
                             return ordered(m);
                         }
@@ -197,7 +204,7 @@ impl Reducer {
             for (i, c) in cand.iter().enumerate() {
                 let p = patch[i];
                 if (p as usize) < self.max_patches && p != NONE && p != UNASSIGNED {
-                    let m = self.slot_metric(k, p as usize, c.pd.xyz(), c.pd.w, min_sep);
+                    let m = self.slot_metric(k, p as usize, c.pd.xyz(), c.pd.w, min_sep, band);
                     if m > NEG_INF {
                         key[p as usize] = key[p as usize].max(ordered(m) | (i as u32 + 1));
                     }
@@ -207,6 +214,8 @@ impl Reducer {
                 let code = kk & IDX_MASK;
                 if code != 0 {
                     self.slots[p][k] = cand[code as usize - 1].pd;
+                } else if kk == 0 && k > 0 {
+                    self.slots[p][k] = Vec4::new(0.0, 0.0, 0.0, EMPTY_DEPTH);
                 }
             }
         }
@@ -293,5 +302,23 @@ mod tests {
         let smallest_kept = kept.iter().cloned().fold(f32::MAX, f32::min);
         // Measures grow with k, so the 16 largest (k = 24..39) survive.
         assert!(smallest_kept >= 6.0 * 25.0, "{kept:?}");
+    }
+
+    /// Regression (box dropped with a 30 mm contact offset sank 3 mm: its patch's slots 1-3 went to the top
+    /// corners, 21 mm up): points of the same normal far above the deepest do not take slots.
+    #[test]
+    fn slots_skip_points_far_above_the_deepest() {
+        let n = Vec4::new(0.0, 0.0, 1.0, 1.0);
+        let mut cands = Vec::new();
+        for (x, y) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            cands.push(Candidate { pd: Vec4::new(0.02 * x, 0.015 * y, 0.0, -0.002), n });
+            cands.push(Candidate { pd: Vec4::new(0.03 * x, 0.025 * y, 0.021, 0.021), n });
+        }
+        let mut r = Reducer::new(16);
+        r.reduce_batch(&cands, 0.9, 0.03, 1e-3);
+        let p = r.patches(1.0);
+        assert_eq!(p.len(), 1);
+        let depths: Vec<f32> = p[0].slots.iter().map(|s| s[3]).collect();
+        assert_eq!(depths, vec![-0.002; 4], "{:?}", p[0].slots);
     }
 }
