@@ -192,23 +192,42 @@ fn m16_nut_lowered_until_touch_contacts_the_load_bearing_flanks() {
     }
 }
 
-/// The analytic SDF (thread kind) on the GPU and its CPU twin agree, on the nut-bolt pair.
+/// The analytic SDF (thread kind) on the GPU and its CPU twin agree. The field uses atan2 and square roots,
+/// which WGSL and Rust round differently in the last bits; on the smoothly turning helical flank that moves
+/// candidates between neighbouring normal bins and, through the two reduction levels, which near-equal
+/// points fill slots 1-3 and how area splits between neighbouring patches (measured: identical seeds and
+/// deepest contacts, patch areas differing by up to 30%). Per-patch bitwise parity is therefore tested on
+/// grids and seeded inputs (engine/tests/contact_gpu.rs); here the generation must match (candidates, the
+/// deepest contact) and the reduced set as a whole: patch count, total area and area-weighted normal.
+const ANALYTIC_AREA_TOL: f32 = 0.01;
+
 #[test]
 fn analytic_thread_sdf_gpu_cpu_parity() {
     let nb = parts();
     let sc = analytic_scene(&nb);
     let gpu = GpuContext::global().unwrap();
-    let phases = [0.0, 2.0];
+    let phases = [0.0, 2.0, 3.5, 5.0];
     let poses = sc.poses(5.0 * nb.pitch - 20e-6, &phases);
-    let pipe = ContactPipeline::new(gpu, &sc.model, 2, &ContactConfig::default()).unwrap();
+    let pipe = ContactPipeline::new(gpu, &sc.model, phases.len() as u32, &ContactConfig::default()).unwrap();
     pipe.write_body_q(gpu, &poses);
     pipe.run(gpu);
     let (g, c) = (pipe.read(gpu), pipe.contacts_cpu(&poses));
-    for w in 0..2 {
+    type Patches = [factory_engine::contact::Patch];
+    let deepest = |ps: &Patches| ps.iter().flat_map(|p| p.contacts.iter().map(|c| c.depth)).fold(f32::MAX, f32::min);
+    let area = |ps: &Patches| ps.iter().map(|p| p.area).sum::<f32>();
+    let mean_normal = |ps: &Patches| ps.iter().fold(Vec3::ZERO, |acc, p| acc + p.normal * p.area).normalize();
+    for w in 0..phases.len() {
         let (a, b) = (g.candidates[w] as i64, c.candidates[w] as i64);
         assert!(a > 5000 && (a - b).abs() <= 2, "world {w}: gpu {a} cpu {b}");
-        assert_eq!(g.patches[w].len(), c.patches[w].len(), "world {w}");
-        let (da, db) = (g.patches[w][0].contacts[0].depth, c.patches[w][0].contacts[0].depth);
-        assert!((da - db).abs() < 1e-8, "deepest {da} vs {db}");
+        let (gp, cp) = (&g.patches[w], &c.patches[w]);
+        let (da, db) = (deepest(gp), deepest(cp));
+        assert!((da - db).abs() < 1e-8, "world {w}: deepest {da} vs {db}");
+        assert!(gp.len().abs_diff(cp.len()) * 10 <= gp.len(), "world {w}: {} vs {} patches", gp.len(), cp.len());
+        let (aa, ab) = (area(gp), area(cp));
+        assert!((aa - ab).abs() <= ANALYTIC_AREA_TOL * aa, "world {w}: area {aa} vs {ab}");
+        let angle = mean_normal(gp).dot(mean_normal(cp)).clamp(-1.0, 1.0).acos().to_degrees();
+        // Each reduction keeps the mean normal within MEAN_NORMAL_TOL_DEG of the unreduced set (the test
+        // above), so the two may differ by that much; measured up to 0.96 deg.
+        assert!(angle <= MEAN_NORMAL_TOL_DEG, "world {w}: mean normals {angle} deg apart");
     }
 }

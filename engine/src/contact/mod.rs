@@ -43,12 +43,10 @@ pub struct ContactConfig {
     /// At most [`max_chunk_triangles`](Self::max_chunk_triangles).
     pub chunk_triangles: u32,
     /// Invocations per workgroup of the generate and merge kernels = candidates per reduction batch
-    /// (32, 64, 128 or 256); the CPU twin cuts its batches to the same size. On lavapipe 64 is faster
-    /// (M16 nut-bolt grid SDF: GPU/twin time 0.74 vs 1.31 at 1 world, 1.33 vs 1.57 at 64) except with
-    /// the analytic bolt SDF at 64 worlds (1.13 vs 0.87); the default stays 256 because with the analytic
-    /// bolt SDF lavapipe and the twin already disagree on the per-job patches at either width (float
-    /// differences in generation), and at 64 that changes the final patch count (49 vs 50) at a nut
-    /// phase that bench/tests/nut_bolt_contacts.rs checks.
+    /// (32, 64, 128 or 256); the CPU twin cuts its batches to the same size. Default 64: on lavapipe
+    /// (which runs a workgroup as width/8 coroutines) it is faster (M16 nut-bolt grid SDF: GPU/twin time
+    /// 0.74 vs 1.31 at 1 world, 1.33 vs 1.57 at 64 worlds), except with the analytic bolt SDF at 64
+    /// worlds (1.13 vs 0.87); on a GPU 64 is two warps or one wave64.
     pub workgroup_size: u32,
 }
 
@@ -59,7 +57,7 @@ impl Default for ContactConfig {
             normal_cos: 10f32.to_radians().cos(),
             iterations: 12,
             chunk_triangles: 0,
-            workgroup_size: 256,
+            workgroup_size: 64,
         }
     }
 }
