@@ -2,4 +2,5 @@
 //! accuracy tests that share them.
 
 pub mod contact_scene;
+pub mod pareto;
 pub mod scene;

@@ -82,6 +82,64 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Speed against error: sweeps the bolt SDF, patch budget, substeps and position iterations one at a
+    /// time around the paper's baseline (frictionless nut, analytic descent as reference) and writes a
+    /// CSV and an SVG plot with the Pareto front (docs/BENCHMARKS.md).
+    Pareto {
+        #[arg(long, value_enum, default_value = "nut-bolt")]
+        scene: SceneName,
+        /// Parallel worlds per run.
+        #[arg(long, default_value_t = 1)]
+        worlds: u32,
+        /// Simulated time per point [s].
+        #[arg(long, default_value_t = 1.0)]
+        seconds: f32,
+        /// Runs per point (round robin over the points); the minimum wall time is kept (the machine is
+        /// shared).
+        #[arg(long, default_value_t = 5)]
+        repeats: u32,
+        /// Frame time step [s].
+        #[arg(long, default_value_t = 1.0 / 60.0)]
+        dt: f32,
+        #[arg(long, default_value_t = 1)]
+        vel_iters: u32,
+        /// Baseline bolt SDF: `analytic` or a grid resolution.
+        #[arg(long, default_value = "analytic")]
+        base_sdf: String,
+        #[arg(long, default_value_t = 64)]
+        base_patches: u32,
+        #[arg(long, default_value_t = 1)]
+        base_substeps: u32,
+        #[arg(long, default_value_t = 20)]
+        base_pos_iters: u32,
+        /// Bolt SDFs to sweep (`analytic` or grid resolutions; 512 bakes for about a minute once, then
+        /// comes from the cache).
+        #[arg(long, value_delimiter = ',', default_value = "analytic,128,256,512")]
+        sdf_res: Vec<String>,
+        /// Patch budgets to sweep.
+        #[arg(long, value_delimiter = ',', default_value = "16,32,64,128")]
+        patches: Vec<u32>,
+        /// Substeps to sweep.
+        #[arg(long, value_delimiter = ',', default_value = "1,2,4")]
+        substeps: Vec<u32>,
+        /// Position iterations to sweep.
+        #[arg(long, value_delimiter = ',', default_value = "5,10,20,40")]
+        pos_iters: Vec<u32>,
+        /// Errors plotted, one panel each with its Pareto front: descent, lead, penetration (all three and
+        /// their fronts are in the CSV).
+        #[arg(long, value_delimiter = ',', default_value = "descent,penetration")]
+        error: Vec<String>,
+        /// ISO size (M4, M8, M12, M16, M20).
+        #[arg(long, default_value = "M16")]
+        size: String,
+        /// Tolerance end: tight or loose.
+        #[arg(long, default_value = "tight")]
+        fit: String,
+        #[arg(long, default_value = "docs/pareto_nut_bolt.csv")]
+        out_csv: PathBuf,
+        #[arg(long, default_value = "docs/pareto_nut_bolt.svg")]
+        out_plot: PathBuf,
+    },
     /// Contact generation + reduction for N parallel copies of a shape pair (paper Table I).
     Contacts {
         /// Which generated pair (ignored with --mesh-a/--mesh-b).
@@ -182,6 +240,60 @@ fn main() -> Result<()> {
             } else {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             }
+        }
+        Cmd::Pareto {
+            scene: SceneName::NutBolt,
+            worlds,
+            seconds,
+            repeats,
+            dt,
+            vel_iters,
+            base_sdf,
+            base_patches,
+            base_substeps,
+            base_pos_iters,
+            sdf_res,
+            patches,
+            substeps,
+            pos_iters,
+            error,
+            size,
+            fit,
+            out_csv,
+            out_plot,
+        } => {
+            use factory_bench::pareto::{self, Axis, ErrorMetric, ParetoArgs, Setting};
+            let args = ParetoArgs {
+                size: size.parse().map_err(|e| anyhow::anyhow!("--size: {e}"))?,
+                fit: fit.parse().map_err(|e| anyhow::anyhow!("--fit: {e}"))?,
+                worlds,
+                seconds,
+                dt,
+                vel_iters,
+                base: Setting {
+                    axis: Axis::Baseline,
+                    sdf: pareto::parse_sdf(&base_sdf)?,
+                    patches: base_patches,
+                    substeps: base_substeps,
+                    pos_iters: base_pos_iters,
+                },
+                sdfs: sdf_res.iter().map(|s| pareto::parse_sdf(s)).collect::<Result<_>>()?,
+                patches,
+                substeps,
+                pos_iters,
+                repeats,
+                metrics: error.iter().map(|e| ErrorMetric::parse(e)).collect::<Result<_>>()?,
+                out_csv,
+                out_plot,
+            };
+            let results = pareto::run_sweep(GpuContext::global()?, &args)?;
+            let ok = results.iter().filter(|p| p.status == pareto::Status::Ok).count();
+            println!(
+                "{ok} of {} points measured; wrote {} and {}",
+                results.len(),
+                args.out_csv.display(),
+                args.out_plot.display()
+            );
         }
         Cmd::Contacts {
             pair,
