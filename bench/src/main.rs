@@ -176,6 +176,9 @@ enum Cmd {
         /// Candidates whose normals are within this angle of a patch's normal join it [deg].
         #[arg(long, default_value_t = 10.0)]
         normal_deg: f32,
+        /// Invocations per contact workgroup (32, 64, 128, 256).
+        #[arg(long, default_value_t = 64)]
+        workgroup: u32,
         /// Contact offset [mm]: candidates farther than this are dropped.
         #[arg(long, default_value_t = 1.0)]
         offset_mm: f32,
@@ -307,6 +310,7 @@ fn main() -> Result<()> {
             sdf,
             patches,
             normal_deg,
+            workgroup,
             offset_mm,
             frames,
             cpu,
@@ -367,8 +371,12 @@ fn main() -> Result<()> {
             // Each world gets its own turn of the nut (threads kept in phase), so worlds differ.
             let phases: Vec<f32> = (0..worlds).map(|w| (w as f32 * 2.399963) % std::f32::consts::TAU).collect();
             let poses = scene.poses(lift, &phases);
-            let cfg =
-                ContactConfig { max_patches: patches, normal_cos: normal_deg.to_radians().cos(), ..Default::default() };
+            let cfg = ContactConfig {
+                max_patches: patches,
+                normal_cos: normal_deg.to_radians().cos(),
+                workgroup_size: workgroup,
+                ..Default::default()
+            };
             let pipe = ContactPipeline::new(gpu, &scene.model, worlds, &cfg)?;
             pipe.write_body_q(gpu, &poses);
             pipe.run(gpu);
@@ -412,6 +420,7 @@ fn main() -> Result<()> {
                 "sdf_bake_or_load_s": bake_s,
                 "max_patches": patches,
                 "normal_bin_deg": normal_deg,
+                "workgroup_size": workgroup,
                 "contact_offset_mm": offset_mm,
                 "lift_mm": lift * 1e3,
                 "deepest_contact_um": min_depth(&out).map(|d| d * 1e6),
