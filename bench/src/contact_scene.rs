@@ -29,6 +29,19 @@ pub struct PartPair {
     pub side_shift: f32,
 }
 
+impl PartPair {
+    /// A generated nut (part a, moving) and bolt (part b, fixed) in their assembled pose.
+    pub fn nut_bolt(nb: &factory_assets::NutBolt) -> Self {
+        PartPair {
+            name: format!("nut-bolt {} {}", nb.spec.size.name(), nb.spec.fit.name()),
+            a: nb.nut.mesh.clone(),
+            b: nb.bolt.mesh.clone(),
+            pitch: nb.pitch,
+            side_shift: 0.0,
+        }
+    }
+}
+
 /// A contact scene: the model plus one set of body poses per world.
 pub struct ContactScene {
     pub pair: PartPair,

@@ -331,13 +331,7 @@ fn main() -> Result<()> {
                         let s: IsoSize = size.parse().map_err(|e| anyhow::anyhow!("--size: {e}"))?;
                         let nb = nut_bolt(s, fit_v, &ThreadOptions::default())?;
                         thread_sdf = Some(nb.bolt_sdf());
-                        PartPair {
-                            name: format!("nut-bolt {} {}", s.name(), fit_v.name()),
-                            a: nb.nut.mesh,
-                            b: nb.bolt.mesh,
-                            pitch: nb.pitch,
-                            side_shift: 0.0,
-                        }
+                        PartPair::nut_bolt(&nb)
                     }
                     PairKind::PegHole => {
                         let s: PegSize = size.parse().map_err(|e| anyhow::anyhow!("--size: {e}"))?;

@@ -74,13 +74,7 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
     ensure!(run.seconds > 0.0 && run.seconds.is_finite(), "--seconds must be > 0, got {}", run.seconds);
     run.solver.validate()?;
     let nb = nut_bolt(run.size, run.fit, &ThreadOptions::default())?;
-    let pair = PartPair {
-        name: "nut-bolt".into(),
-        a: nb.nut.mesh.clone(),
-        b: nb.bolt.mesh.clone(),
-        pitch: nb.pitch,
-        side_shift: 0.0,
-    };
+    let pair = PartPair::nut_bolt(&nb);
     let mut scene = match run.sdf_resolution {
         None => ContactScene::with_thread_sdf(pair, nb.bolt_sdf(), run.contact_offset),
         Some(r) => ContactScene::new(pair, r, run.contact_offset, &SdfCache::new(SdfCache::default_dir()))?,

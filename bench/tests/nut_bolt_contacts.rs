@@ -25,13 +25,7 @@ fn parts() -> NutBolt {
 }
 
 fn scene(nb: &NutBolt, sdf_res: u32) -> ContactScene {
-    let pair = PartPair {
-        name: "M16".into(),
-        a: nb.nut.mesh.clone(),
-        b: nb.bolt.mesh.clone(),
-        pitch: nb.pitch,
-        side_shift: 0.0,
-    };
+    let pair = PartPair::nut_bolt(nb);
     ContactScene::new(pair, sdf_res, OFFSET, &SdfCache::new(SdfCache::default_dir())).unwrap()
 }
 
@@ -130,13 +124,7 @@ fn m16_centred_nut_is_separated_by_the_iso_flank_gap() {
 }
 
 fn analytic_scene(nb: &NutBolt) -> ContactScene {
-    let pair = PartPair {
-        name: "M16".into(),
-        a: nb.nut.mesh.clone(),
-        b: nb.bolt.mesh.clone(),
-        pitch: nb.pitch,
-        side_shift: 0.0,
-    };
+    let pair = PartPair::nut_bolt(nb);
     ContactScene::with_thread_sdf(pair, nb.bolt_sdf(), OFFSET)
 }
 

@@ -33,13 +33,7 @@ struct Run {
 
 fn release_nut(mu: f32, frames: u32, on_gpu: bool, substeps: u32) -> Run {
     let nb = nut_bolt(IsoSize::M16, Fit::Tight, &ThreadOptions::default()).unwrap();
-    let pair = PartPair {
-        name: "M16".into(),
-        a: nb.nut.mesh.clone(),
-        b: nb.bolt.mesh.clone(),
-        pitch: nb.pitch,
-        side_shift: 0.0,
-    };
+    let pair = PartPair::nut_bolt(&nb);
     let mut scene = ContactScene::with_thread_sdf(pair, nb.bolt_sdf(), 1.0e-3);
     scene.model.pairs[0].friction = mu;
     let gpu = GpuContext::global().unwrap();

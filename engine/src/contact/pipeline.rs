@@ -198,15 +198,7 @@ impl ContactPipeline {
             world_count as u64 * pair_count as u64 * cfg.max_patches as u64 * 4 * 16,
         );
         let group = |pipeline: &wgpu::ComputePipeline, index: u32, buffers: &[&wgpu::Buffer]| {
-            dev.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: None,
-                layout: &pipeline.get_bind_group_layout(index),
-                entries: &buffers
-                    .iter()
-                    .enumerate()
-                    .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-                    .collect::<Vec<_>>(),
-            })
+            gpu.bind_group(pipeline, index, buffers)
         };
         let gp = &generate.pipeline;
         let gen_groups = [
