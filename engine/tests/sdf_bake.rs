@@ -580,13 +580,3 @@ fn killed_bake_leaves_no_corrupt_cache() {
     assert_eq!(hit, cache::load(&cache.entry_path(mesh, &params(done[0]))).unwrap());
     std::fs::remove_dir_all(&dir).unwrap();
 }
-
-/// Not a test: `cargo test --release -p factory-engine --test sdf_bake -- --ignored --nocapture bake_time`.
-#[test]
-#[ignore = "timing, run by hand"]
-fn bake_time_bolt_256() {
-    recorder();
-    let start = Instant::now();
-    let g = bake(bolt(), &BakeParams::default()).unwrap();
-    eprintln!("bolt at 256: {} x {} x {} samples in {:.2?}", g.dims.x, g.dims.y, g.dims.z, start.elapsed());
-}
