@@ -9,6 +9,7 @@ pub mod error;
 pub mod mesh;
 
 pub use error::{EngineError, Result};
+pub mod builder;
 pub mod contact;
 pub mod fsutil;
 pub mod gpu;
