@@ -4,7 +4,7 @@
 //! and the solver's `BodyModel`. Meshes and SDF grids are per shape, shared by every world (the world is
 //! the batch axis of the pipelines; nothing is copied per world).
 //!
-//! Pair rules: two shapes are paired when at least one sits on a dynamic body, they are not on the same
+//! Pair rules: two shapes are paired when at least one sits on a dynamic or kinematic body, they are not on the same
 //! body, each one's group bits intersect the other's mask (PhysX-style collision filtering), and the pair
 //! was not filtered out by [`ModelBuilder::filter_pair`]. A pair's friction is the mean of its shapes'
 //! (PhysX's default "average" combine mode), its contact offset the larger of the two.
@@ -94,6 +94,13 @@ impl ModelBuilder {
         BodyHandle(self.dynamic.len() as u32 - 1)
     }
 
+    /// A kinematic body: moved by the velocity set in the state, unaffected by gravity and contacts.
+    pub fn add_kinematic_body(&mut self) -> BodyHandle {
+        self.bodies.add_kinematic();
+        self.dynamic.push(false);
+        BodyHandle(self.dynamic.len() as u32 - 1)
+    }
+
     /// A static body (it never moves; its pose is set in the state).
     pub fn add_static_body(&mut self) -> BodyHandle {
         self.bodies.add_static();
@@ -132,8 +139,9 @@ impl ModelBuilder {
         self
     }
 
+    /// Dynamic or kinematic: a body whose shapes can meet a static shape.
     fn is_dynamic(&self, body: Option<BodyHandle>) -> bool {
-        body.is_some_and(|b| self.dynamic[b.0 as usize])
+        body.is_some_and(|b| self.dynamic[b.0 as usize] || self.bodies.is_kinematic(b.0 as usize))
     }
 
     /// Whether shapes `a` and `b` form a contact pair (see the module doc).

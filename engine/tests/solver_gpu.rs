@@ -221,3 +221,57 @@ fn a_step_beyond_lavapipes_loop_budget_is_refused() {
     assert!(e.contains("loop") && e.contains("substeps"), "{e}");
     assert!(GpuSolver::new(g, &pipe, &bodies, &SolverConfig { substeps: 4, ..Default::default() }).is_ok());
 }
+
+/// A kinematic platform moves with its set velocity, carries a dynamic box, and is not slowed by it.
+#[test]
+fn a_kinematic_platform_lifts_a_box_at_its_own_speed() {
+    let g = gpu();
+    let mut bodies = BodyModel { gravity: Vec3::new(0.0, 0.0, -9.81), ..Default::default() };
+    let platform = bodies.add_kinematic();
+    let mass = 0.2;
+    let inertia = Mat3::from_diagonal(
+        Vec3::new(H.y * H.y + H.z * H.z, H.x * H.x + H.z * H.z, H.x * H.x + H.y * H.y) * mass / 3.0,
+    );
+    let box_body = bodies.add_dynamic(mass, inertia, Vec3::ZERO);
+    let contacts = ContactModel {
+        body_count: 2,
+        pairs: vec![PairSpec {
+            body_a: box_body,
+            a_pose: (Vec3::ZERO, Quat::IDENTITY),
+            query: Arc::new(QueryShape::cuboid(H)),
+            body_b: platform,
+            b_pose: (Vec3::ZERO, Quat::IDENTITY),
+            sdf: SdfShape::Plane,
+            contact_offset: 0.005,
+            friction: 0.5,
+        }],
+    };
+    let pipe = ContactPipeline::new(g, &contacts, 1, &ContactConfig::default()).unwrap();
+    let solver = GpuSolver::new(g, &pipe, &bodies, &SolverConfig::default()).unwrap();
+    let lift = 0.05; // [m/s]
+    let start = BodyState {
+        body_q: vec![
+            TransformGpu::new(Vec3::ZERO, Quat::IDENTITY),
+            TransformGpu::new(Vec3::new(0.0, 0.0, H.z), Quat::IDENTITY),
+        ],
+        body_qd: vec![[Vec3::new(0.0, 0.0, lift), Vec3::ZERO], [Vec3::ZERO; 2]],
+    };
+    solver.write_state(g, &pipe, &start);
+    for _ in 0..60 {
+        frame(g, &pipe, &solver);
+    }
+    let (s, ok) = solver.read_state(g, &pipe);
+    assert!(ok.iter().all(|&o| o));
+    let t = 60.0 * SolverConfig::default().dt;
+    // The platform moved exactly with its velocity (f32 accumulation over 60 steps).
+    assert!((s.body_q[0].p[2] - lift * t).abs() < 1e-6, "platform z {}", s.body_q[0].p[2]);
+    assert!((s.body_qd[0][0].z - lift).abs() < 1e-7, "platform velocity {}", s.body_qd[0][0]);
+    // The box rides on it.
+    assert!(
+        (s.body_q[1].p[2] - (s.body_q[0].p[2] + H.z)).abs() < 2e-5,
+        "box z {} on platform {}",
+        s.body_q[1].p[2],
+        s.body_q[0].p[2]
+    );
+    assert!((s.body_qd[1][0].z - lift).abs() < 2e-3, "box velocity {}", s.body_qd[1][0]);
+}

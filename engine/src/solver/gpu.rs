@@ -36,12 +36,15 @@ pub struct SolverParamsGpu {
     pub gravity: [f32; 4],
 }
 
-/// GPU mirror of `Body` in solver.wgsl: inverse inertia columns (16-byte aligned) and COM + inverse mass.
+/// GPU mirror of `Body` in solver.wgsl: inverse inertia columns (16-byte aligned), COM + inverse mass,
+/// flags.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct BodyGpu {
     pub inv_inertia: [[f32; 4]; 3],
     pub com_inv_mass: [f32; 4],
+    /// x: 1 for a kinematic body.
+    pub flags: [u32; 4],
 }
 
 impl SolverConfig {
@@ -161,6 +164,7 @@ impl GpuSolver {
                         m.z_axis.extend(0.0).to_array(),
                     ],
                     com_inv_mass: model.body_com[i].extend(model.body_inv_mass[i]).to_array(),
+                    flags: [model.is_kinematic(i) as u32, 0, 0, 0],
                 }
             })
             .collect();

@@ -35,6 +35,9 @@ pub struct BodyModel {
     pub body_inv_inertia: Vec<Mat3>,
     /// Centre of mass in the body frame [m], shape [body_count].
     pub body_com: Vec<Vec3>,
+    /// Kinematic bodies move with the velocity in the state (no gravity, no contact impulses), shape
+    /// [body_count] or shorter (missing entries: not kinematic).
+    pub body_kinematic: Vec<bool>,
     /// Gravity [m/s^2].
     pub gravity: Vec3,
 }
@@ -50,6 +53,19 @@ impl BodyModel {
         self.body_inv_inertia.push(inertia.inverse());
         self.body_com.push(com);
         self.body_inv_mass.len() as u32 - 1
+    }
+
+    /// Whether body `i` is kinematic.
+    pub fn is_kinematic(&self, i: usize) -> bool {
+        self.body_kinematic.get(i).copied().unwrap_or(false)
+    }
+
+    /// Adds a kinematic body: infinite mass for contacts, moved by the velocity set in the state.
+    pub fn add_kinematic(&mut self) -> u32 {
+        let i = self.add_static();
+        self.body_kinematic.resize(i as usize + 1, false);
+        self.body_kinematic[i as usize] = true;
+        i
     }
 
     /// Adds a static body (never moves).
@@ -183,7 +199,7 @@ pub fn step_cpu(
                 solve_rows(&mut rows, flat, &pos, &mut vel, &inv_m, &com, &inv_i_world, h, cfg, true);
             }
             for i in 0..nb {
-                if inv_m(i) > 0.0 {
+                if inv_m(i) > 0.0 || model.is_kinematic(i) {
                     let (p, q) = pos[i];
                     let c = p + q * com(i);
                     let c2 = c + vel[i][0] * h;

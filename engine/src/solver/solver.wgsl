@@ -27,6 +27,8 @@ struct Body {
     inv_inertia: mat3x3<f32>,
     // COM in the body frame xyz [m], inverse mass w [1/kg].
     com_inv_mass: vec4<f32>,
+    // x: 1 for a kinematic body (moved by its velocity, no gravity, no impulses).
+    flags: vec4<u32>,
 }
 
 // A contact row: anchor (query element point in body a's frame) xyz + pair index (bits) w; accumulated
@@ -236,7 +238,7 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         for (var b = 0u; b < sp.body_count; b++) {
             let m = bodies[b];
-            if (m.com_inv_mass.w > 0.0) {
+            if (m.com_inv_mass.w > 0.0 || m.flags.x != 0u) {
                 let g = first + b;
                 let t = body_q[g];
                 let c = t.p.xyz + quat_rotate(t.q, m.com_inv_mass.xyz) + body_qd[2u * g].xyz * h;
