@@ -202,7 +202,12 @@ impl GpuContext {
 
     /// Copies `buffer` back to the host and waits. For tests, benchmarks and logging; never in a step loop.
     pub fn read_buffer<T: Pod>(&self, buffer: &wgpu::Buffer) -> Vec<T> {
-        let size = buffer.size();
+        self.read_buffer_prefix(buffer, buffer.size())
+    }
+
+    /// Like [`read_buffer`](Self::read_buffer), but only the first `bytes` bytes (rounded up to 4).
+    pub fn read_buffer_prefix<T: Pod>(&self, buffer: &wgpu::Buffer, bytes: u64) -> Vec<T> {
+        let size = bytes.next_multiple_of(4).min(buffer.size());
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size,

@@ -227,7 +227,8 @@ impl GpuSolver {
     pub fn read_state(&self, gpu: &GpuContext, contacts: &ContactPipeline) -> (BodyState, Vec<bool>) {
         let q: Vec<crate::contact::TransformGpu> = gpu.read_buffer(&contacts.body_q);
         let qd: Vec<[f32; 4]> = gpu.read_buffer(&self.body_qd);
-        let scratch: Vec<[f32; 4]> = gpu.read_buffer(&self.scratch);
+        // Only the per-world status at the front of the scratch buffer, not the rows behind it.
+        let scratch: Vec<[f32; 4]> = gpu.read_buffer_prefix(&self.scratch, self.world_count as u64 * 16);
         let n = (self.world_count * contacts.body_count) as usize;
         let body_qd = (0..n)
             .map(|i| [glam::Vec4::from_array(qd[2 * i]).truncate(), glam::Vec4::from_array(qd[2 * i + 1]).truncate()])
