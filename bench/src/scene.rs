@@ -101,10 +101,7 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
     let mut finite = true;
     for _ in 0..frames {
         let t = Instant::now();
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        pipe.encode(&mut enc);
-        solver.encode(&mut enc);
-        gpu.queue.submit([enc.finish()]);
+        solver.submit_frame(gpu, &pipe);
         gpu.wait();
         wall += t.elapsed().as_secs_f64();
         // Figures (outside the timing): the frame's contacts and world 0's turn.

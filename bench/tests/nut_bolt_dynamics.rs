@@ -55,10 +55,7 @@ fn release_nut(mu: f32, frames: u32, on_gpu: bool, substeps: u32) -> Run {
         if on_gpu {
             // Contacts and solver in one submission; the state stays on the device (read here only to
             // track the turns).
-            let mut enc = gpu.device.create_command_encoder(&Default::default());
-            pipe.encode(&mut enc);
-            solver.encode(&mut enc);
-            gpu.queue.submit([enc.finish()]);
+            solver.submit_frame(gpu, &pipe);
             let (s, ok) = solver.read_state(gpu, &pipe);
             assert!(ok[0], "world diverged");
             state = s;

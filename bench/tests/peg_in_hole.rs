@@ -88,10 +88,7 @@ fn run(start: &BodyState, gravity: f32, frames: u32, on_gpu: bool) -> BodyState 
     solver.write_state(gpu, &pipe, &state);
     for f in 0..frames {
         if on_gpu {
-            let mut enc = gpu.device.create_command_encoder(&Default::default());
-            pipe.encode(&mut enc);
-            solver.encode(&mut enc);
-            gpu.queue.submit([enc.finish()]);
+            solver.submit_frame(gpu, &pipe);
             if f + 1 == frames {
                 let (s, ok) = solver.read_state(gpu, &pipe);
                 assert!(ok[0], "GPU solver: world diverged");

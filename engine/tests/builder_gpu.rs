@@ -41,10 +41,7 @@ fn replicated_worlds_drop_their_boxes_independently_onto_the_table() {
     solver.write_state(g, &pipe, &start);
     let mut landed = vec![None; worlds as usize];
     for frame in 0..90 {
-        let mut enc = g.device.create_command_encoder(&Default::default());
-        pipe.encode(&mut enc);
-        solver.encode(&mut enc);
-        g.queue.submit([enc.finish()]);
+        solver.submit_frame(g, &pipe);
         let (s, ok) = solver.read_state(g, &pipe);
         assert!(ok.iter().all(|&o| o));
         for w in 0..worlds as usize {

@@ -59,10 +59,7 @@ fn gpu() -> &'static GpuContext {
 }
 
 fn frame(g: &GpuContext, pipe: &ContactPipeline, solver: &GpuSolver) {
-    let mut enc = g.device.create_command_encoder(&Default::default());
-    pipe.encode(&mut enc);
-    solver.encode(&mut enc);
-    g.queue.submit([enc.finish()]);
+    solver.submit_frame(g, &pipe);
 }
 
 #[test]

@@ -113,10 +113,7 @@ impl Sim {
     fn step(&mut self) -> &BodyState {
         let g = gpu();
         if self.on_gpu {
-            let mut enc = g.device.create_command_encoder(&Default::default());
-            self.pipe.encode(&mut enc);
-            self.solver.encode(&mut enc);
-            g.queue.submit([enc.finish()]);
+            self.solver.submit_frame(g, &self.pipe);
             let (s, ok) = self.solver.read_state(g, &self.pipe);
             assert!(ok[0], "{}: world diverged", self.who());
             self.state = s;

@@ -223,6 +223,14 @@ impl GpuSolver {
         pass.dispatch_workgroups(self.world_count.div_ceil(SOLVER_WG), 1, 1);
     }
 
+    /// Submits one whole frame: the contact pipeline's dispatches, then this step, in one submission.
+    pub fn submit_frame(&self, gpu: &GpuContext, contacts: &ContactPipeline) {
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        contacts.encode(&mut enc);
+        self.encode(&mut enc);
+        gpu.queue.submit([enc.finish()]);
+    }
+
     /// Reads poses, velocities and per-world status back (waits for the GPU).
     pub fn read_state(&self, gpu: &GpuContext, contacts: &ContactPipeline) -> (BodyState, Vec<bool>) {
         let q: Vec<crate::contact::TransformGpu> = gpu.read_buffer(&contacts.body_q);
