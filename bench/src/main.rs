@@ -179,6 +179,12 @@ enum Cmd {
         /// Invocations per contact workgroup (32, 64, 128, 256).
         #[arg(long, default_value_t = 64)]
         workgroup: u32,
+        /// Projected-gradient iterations per query triangle.
+        #[arg(long, default_value_t = 12)]
+        descent_iters: u32,
+        /// Thread columns per turn of the generated nut and bolt meshes (multiple of 12, >= 24).
+        #[arg(long, default_value_t = 192)]
+        segments_per_turn: usize,
         /// Contact offset [mm]: candidates farther than this are dropped.
         #[arg(long, default_value_t = 1.0)]
         offset_mm: f32,
@@ -311,6 +317,8 @@ fn main() -> Result<()> {
             patches,
             normal_deg,
             workgroup,
+            descent_iters,
+            segments_per_turn,
             offset_mm,
             frames,
             cpu,
@@ -329,7 +337,8 @@ fn main() -> Result<()> {
                 _ => match pair {
                     PairKind::NutBolt => {
                         let s: IsoSize = size.parse().map_err(|e| anyhow::anyhow!("--size: {e}"))?;
-                        let nb = nut_bolt(s, fit_v, &ThreadOptions::default())?;
+                        let opts = ThreadOptions { segments_per_turn, ..Default::default() };
+                        let nb = nut_bolt(s, fit_v, &opts)?;
                         thread_sdf = Some(nb.bolt_sdf());
                         PartPair::nut_bolt(&nb)
                     }
@@ -369,6 +378,7 @@ fn main() -> Result<()> {
                 max_patches: patches,
                 normal_cos: normal_deg.to_radians().cos(),
                 workgroup_size: workgroup,
+                iterations: descent_iters,
                 ..Default::default()
             };
             let pipe = ContactPipeline::new(gpu, &scene.model, worlds, &cfg)?;
@@ -415,6 +425,7 @@ fn main() -> Result<()> {
                 "max_patches": patches,
                 "normal_bin_deg": normal_deg,
                 "workgroup_size": workgroup,
+                "descent_iters": descent_iters,
                 "contact_offset_mm": offset_mm,
                 "lift_mm": lift * 1e3,
                 "deepest_contact_um": min_depth(&out).map(|d| d * 1e6),
