@@ -9,7 +9,7 @@ use factory_bench::scene::TurnCounter;
 use factory_engine::contact::{ContactConfig, ContactPipeline};
 use factory_engine::gpu::GpuContext;
 use factory_engine::solver::gpu::GpuSolver;
-use factory_engine::solver::{step_cpu, BodyModel, BodyState, SolverConfig};
+use factory_engine::solver::{step_cpu, BodyModel, BodyState, SolverConfig, WarmStart};
 use glam::Vec3;
 
 /// Descent after 1 s within 5% of the analytic value (the tolerance).
@@ -51,6 +51,7 @@ fn release_nut(mu: f32, frames: u32, on_gpu: bool, substeps: u32) -> Run {
     let mut yaw = TurnCounter::default();
     let solver = GpuSolver::new(gpu, &pipe, &model, &cfg).unwrap();
     solver.write_state(gpu, &pipe, &state);
+    let mut warm = WarmStart::default();
     for _ in 0..frames {
         if on_gpu {
             // Contacts and solver in one submission; the state stays on the device (read here only to
@@ -63,7 +64,7 @@ fn release_nut(mu: f32, frames: u32, on_gpu: bool, substeps: u32) -> Run {
             pipe.write_body_q(gpu, &state.body_q);
             pipe.run(gpu);
             let contacts = pipe.read(gpu);
-            let ok = step_cpu(&model, &mut state, &contacts, &pipe.flat, &cfg);
+            let ok = step_cpu(&model, &mut state, &contacts, &pipe.flat, &cfg, &mut warm);
             assert!(ok[0], "world diverged");
         }
         yaw.update(&state.body_q[0]);

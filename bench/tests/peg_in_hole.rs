@@ -16,7 +16,7 @@ use factory_engine::contact::{ContactConfig, ContactModel, ContactPipeline, Tran
 use factory_engine::gpu::GpuContext;
 use factory_engine::sdf::cache::SdfCache;
 use factory_engine::solver::gpu::GpuSolver;
-use factory_engine::solver::{step_cpu, BodyModel, BodyState, SolverConfig};
+use factory_engine::solver::{step_cpu, BodyModel, BodyState, SolverConfig, WarmStart};
 use glam::{Quat, Vec3};
 use std::sync::{Arc, OnceLock};
 
@@ -86,6 +86,7 @@ fn run(start: &BodyState, gravity: f32, frames: u32, on_gpu: bool) -> BodyState 
     let solver = GpuSolver::new(gpu, &pipe, &bodies, &cfg).unwrap();
     let mut state = start.clone();
     solver.write_state(gpu, &pipe, &state);
+    let mut warm = WarmStart::default();
     for f in 0..frames {
         if on_gpu {
             solver.submit_frame(gpu, &pipe);
@@ -98,7 +99,10 @@ fn run(start: &BodyState, gravity: f32, frames: u32, on_gpu: bool) -> BodyState 
             pipe.write_body_q(gpu, &state.body_q);
             pipe.run(gpu);
             let contacts = pipe.read(gpu);
-            assert!(step_cpu(&bodies, &mut state, &contacts, &pipe.flat, &cfg)[0], "CPU reference: world diverged");
+            assert!(
+                step_cpu(&bodies, &mut state, &contacts, &pipe.flat, &cfg, &mut warm)[0],
+                "CPU reference: world diverged"
+            );
         }
     }
     state

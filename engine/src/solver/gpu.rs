@@ -124,12 +124,15 @@ impl GpuSolver {
         // and silently cuts every loop short beyond it (see ContactConfig::max_chunk_triangles); refuse a
         // step that could exceed 7/8 of it there rather than return a truncated solve.
         if gpu.is_software() {
-            // Rows are built one per loop pass (over patch slots) and swept four per pass (solver.wgsl).
-            let passes = (max_rows + max_rows.div_ceil(4) + pair_count) as u64
-                + model.body_count() as u64
+            // Loop passes (solver.wgsl): building visits every patch slot of every pair (with two 4-pass
+            // loops per slot for the warm-start match); each sweep and each warm start visits the pairs and
+            // their patches (four rows per pass); the body loops run twice per substep.
+            let (pairs, patches) = (pair_count as u64, contacts.cfg.max_patches as u64);
+            let per_sweep = pairs * (patches + 1) + 1;
+            let passes = pairs * (1 + patches * (1 + 4 + 4 * 5))
+                + 2 * model.body_count() as u64
                 + cfg.substeps as u64
-                    * ((cfg.pos_iters + cfg.vel_iters) as u64 * (max_rows.div_ceil(4) as u64 + 1)
-                        + 3 * model.body_count() as u64);
+                    * ((cfg.pos_iters + cfg.vel_iters + 1) as u64 * per_sweep + 2 * model.body_count() as u64 + 2);
             let budget = 65535 * 7 / 8;
             if passes > budget {
                 return Err(EngineError::Config {
@@ -181,7 +184,7 @@ impl GpuSolver {
         let bodies_buf = gpu.storage_buffer("bodies", &bodies, none);
         let nbw = (world_count * contacts.body_count) as u64;
         let body_qd = gpu.storage_buffer_zeroed("body_qd", nbw * 2 * 16);
-        let scratch_bytes = (world_count as u64 + world_count as u64 * max_rows as u64 * 2) * 16;
+        let scratch_bytes = (world_count as u64 + world_count as u64 * max_rows as u64 * 4) * 16;
         if scratch_bytes > gpu.limits().max_storage_buffer_binding_size {
             return Err(EngineError::TooLarge {
                 what: format!("solver rows for {world_count} worlds x {max_rows} contacts"),
@@ -202,14 +205,23 @@ impl GpuSolver {
         Ok(GpuSolver { cfg: cfg.clone(), body_qd, scratch, pipeline, groups, world_count })
     }
 
-    /// Uploads a state (poses go to the contact pipeline's body_q).
+    /// Uploads a state (poses go to the contact pipeline's body_q); every world starts cold (its
+    /// warm-start impulses are forgotten, as with a fresh [`super::WarmStart`] on the CPU).
     pub fn write_state(&self, gpu: &GpuContext, contacts: &ContactPipeline, state: &BodyState) {
+        self.forget_warm_start(gpu);
         contacts.write_body_q(gpu, &state.body_q);
         let qd: Vec<[f32; 4]> =
             state.body_qd.iter().flat_map(|v| [v[0].extend(0.0).to_array(), v[1].extend(0.0).to_array()]).collect();
         if !qd.is_empty() {
             gpu.queue.write_buffer(&self.body_qd, 0, bytemuck::cast_slice(&qd));
         }
+    }
+
+    /// Forgets every world's warm-start impulses (the twin of a fresh [`super::WarmStart`]).
+    pub fn forget_warm_start(&self, gpu: &GpuContext) {
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(&self.scratch, 0, None);
+        gpu.queue.submit([enc.finish()]);
     }
 
     /// Records one solver step (after the contact pipeline's dispatches of the same frame).

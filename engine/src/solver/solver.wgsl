@@ -32,11 +32,22 @@ struct Body {
 }
 
 // A contact row: anchor (query element point in body a's frame) xyz + pair index (bits) w; accumulated
-// impulses (normal, tangent 1, tangent 2) xyz and friction coefficient w.
+// impulses of the current move (normal, tangent 1, tangent 2) xyz and friction coefficient w; the normal
+// it was last solved with xyz (w = 1 once solved); the contact point in body b's frame at the frame's start
+// xyz (for matching the row next frame).
 struct Row {
     anchor: vec4<f32>,
     lambda: vec4<f32>,
+    normal: vec4<f32>,
+    point_b: vec4<f32>,
 }
+
+// vec4s per row in solver_scratch.
+const ROW: u32 = 4u;
+// Warm-start match: anchor and point within this fraction of the pair's contact offset, normals within
+// acos(WARM_COS) (see the row building in step).
+const WARM_DISTANCE: f32 = 0.1;
+const WARM_COS: f32 = 0.985;
 
 @group(0) @binding(0) var<uniform> sp: SolverParams;
 @group(0) @binding(1) var<storage, read> pairs: array<Pair>;
@@ -46,7 +57,7 @@ struct Row {
 @group(1) @binding(1) var<storage, read> patch_counts: array<u32>;
 @group(2) @binding(0) var<storage, read_write> body_q: array<Transform>;
 @group(2) @binding(1) var<storage, read_write> body_qd: array<vec4<f32>>;  // [lin, ang] per body
-// [world_count] status (x: 1 ok, 0 diverged), then 2 * max_rows vec4 per world (Row.anchor, Row.lambda).
+// [world_count] status (x: 1 ok, 0 diverged), then ROW * max_rows vec4 per world (Row).
 @group(2) @binding(2) var<storage, read_write> solver_scratch: array<vec4<f32>>;
 
 fn quat_to_mat3(q: vec4<f32>) -> mat3x3<f32> {
@@ -136,6 +147,9 @@ fn friction_row(va: BodyView, vb: BodyView, ra: vec3<f32>, rb: vec3<f32>, t: vec
 
 fn solve_row(world: u32, ri: u32, h: f32, bias: bool) {
     let anchor = solver_scratch[ri];
+    if (bitcast<u32>(anchor.w) == NONE) {
+        return; // an empty slot of its patch
+    }
     var lambda = solver_scratch[ri + 1u];
     let pair = pairs[bitcast<u32>(anchor.w)];
     let va = view(world, pair.body_a);
@@ -178,20 +192,109 @@ fn solve_row(world: u32, ri: u32, h: f32, bias: bool) {
         lambda.z = friction_row(va, vb, ra, rb, t2, lambda.z, limit);
     }
     solver_scratch[ri + 1u] = lambda;
+    solver_scratch[ri + 2u] = vec4<f32>(n, 1.0);
 }
 
-// One Gauss-Seidel sweep over the world's rows, four rows per loop pass (lavapipe budgets loop passes).
-fn sweep(world: u32, row0: u32, n_rows: u32, h: f32, bias: bool) {
-    for (var r = 0u; r < n_rows; r += 4u) {
-        solve_row(world, row0 + 2u * r, h, bias);
-        if (r + 1u < n_rows) {
-            solve_row(world, row0 + 2u * (r + 1u), h, bias);
+// Warm start of one row at the start of a substep: re-applies the impulses of the previous substep (or of
+// the matching row last frame) along the normal they were solved with (the anchor moved with body a since).
+fn warm_row(world: u32, ri: u32) {
+    let anchor = solver_scratch[ri];
+    let nw = solver_scratch[ri + 2u];
+    let lambda = solver_scratch[ri + 1u];
+    if (bitcast<u32>(anchor.w) == NONE || nw.w == 0.0 || all(lambda.xyz == vec3<f32>(0.0))) {
+        return;
+    }
+    let pair = pairs[bitcast<u32>(anchor.w)];
+    let va = view(world, pair.body_a);
+    let vb = view(world, pair.body_b);
+    let n = nw.xyz;
+    let xa = va.pos + quat_rotate(va.rot, anchor.xyz) - pair.radius * n;
+    let ra = xa - (va.pos + quat_rotate(va.rot, va.com));
+    let rb = xa - (vb.pos + quat_rotate(vb.rot, vb.com));
+    let t1 = any_orthonormal(n);
+    let t2 = cross(n, t1);
+    let imp = lambda.x * n + lambda.y * t1 + lambda.z * t2;
+    apply(va, ra, imp, 1.0);
+    apply(vb, rb, imp, -1.0);
+}
+
+// Row of slot k of patch i of pair p: rows keep their patch slots (an empty slot is a row with pair NONE),
+// so a contact can look for itself among its patch's rows of last frame.
+fn row_index(row0: u32, p: u32, i: u32, k: u32) -> u32 {
+    return row0 + ROW * ((p * MAX_PATCHES + i) * 4u + k);
+}
+
+// Builds the 4 rows of patch i of pair p from the reduced contacts. Warm start across frames: a row takes
+// over the impulses of the closest of its patch's rows last frame that was the same contact (anchor on a
+// and point on b within WARM_DISTANCE of the contact offset, normal within acos(WARM_COS)). The reduction
+// is deterministic, so resting contacts come back in the same patch, though not always in the same slot
+// (the deepest of four equally deep corners changes with rounding).
+fn build_patch_rows(row0: u32, p: u32, i: u32, pair: Pair, va: BodyView, vb: BodyView, pt: PatchOut) -> u32 {
+    let g0 = row_index(row0, p, i, 0u);
+    var old_a: array<vec4<f32>, 4>;
+    var old_l: array<vec4<f32>, 4>;
+    var old_n: array<vec4<f32>, 4>;
+    var old_b: array<vec4<f32>, 4>;
+    for (var j = 0u; j < 4u; j++) {
+        let rj = g0 + ROW * j;
+        old_a[j] = solver_scratch[rj];
+        old_l[j] = solver_scratch[rj + 1u];
+        old_n[j] = solver_scratch[rj + 2u];
+        old_b[j] = solver_scratch[rj + 3u];
+    }
+    let tol = WARM_DISTANCE * pair.contact_offset;
+    var built = 0u;
+    for (var k = 0u; k < 4u; k++) {
+        let rk = g0 + ROW * k;
+        let c = pt.slots[k];
+        if (c.w >= VALID_BELOW) {
+            solver_scratch[rk] = vec4<f32>(0.0, 0.0, 0.0, bitcast<f32>(NONE));
+            continue;
         }
-        if (r + 2u < n_rows) {
-            solve_row(world, row0 + 2u * (r + 2u), h, bias);
+        let local = quat_rotate(vec4<f32>(-va.rot.xyz, va.rot.w), c.xyz + pair.radius * pt.normal.xyz - va.pos);
+        let pb = quat_rotate(vec4<f32>(-vb.rot.xyz, vb.rot.w), c.xyz - vb.pos);
+        var lambda = vec4<f32>(0.0, 0.0, 0.0, pair.friction);
+        var normal = vec4<f32>(0.0);
+        var best = tol;
+        var found = false;
+        for (var j = 0u; j < 4u; j++) {
+            if (bitcast<u32>(old_a[j].w) == p && old_n[j].w != 0.0 && dot(old_n[j].xyz, pt.normal.xyz) >= WARM_COS) {
+                let d = distance(old_a[j].xyz, local);
+                if (d <= tol && distance(old_b[j].xyz, pb) <= tol && (!found || d < best)) {
+                    best = d;
+                    found = true;
+                    lambda = vec4<f32>(old_l[j].xyz, pair.friction);
+                    normal = old_n[j];
+                }
+            }
         }
-        if (r + 3u < n_rows) {
-            solve_row(world, row0 + 2u * (r + 3u), h, bias);
+        solver_scratch[rk] = vec4<f32>(local, bitcast<f32>(p));
+        solver_scratch[rk + 1u] = lambda;
+        solver_scratch[rk + 2u] = normal;
+        solver_scratch[rk + 3u] = vec4<f32>(pb, 0.0);
+        built += 1u;
+    }
+    return built;
+}
+
+// One pass over the world's rows in order (pair, patch, slot), four rows (one patch) per loop pass
+// (lavapipe budgets loop passes): a Gauss-Seidel sweep (warm = false) or the warm start (warm = true).
+fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool) {
+    for (var p = 0u; p < sp.pair_count; p++) {
+        let count = patch_counts[world * sp.pair_count + p];
+        for (var i = 0u; i < count; i++) {
+            let g0 = row_index(row0, p, i, 0u);
+            if (warm) {
+                warm_row(world, g0);
+                warm_row(world, g0 + ROW);
+                warm_row(world, g0 + 2u * ROW);
+                warm_row(world, g0 + 3u * ROW);
+            } else {
+                solve_row(world, g0, h, bias);
+                solve_row(world, g0 + ROW, h, bias);
+                solve_row(world, g0 + 2u * ROW, h, bias);
+                solve_row(world, g0 + 3u * ROW, h, bias);
+            }
         }
     }
 }
@@ -204,23 +307,21 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let h = sp.dt / f32(sp.substeps);
     // Rows from the reduced contacts: the query element's point in body a's frame at the frame's start.
-    let row0 = sp.world_count + world * sp.max_rows * 2u;
+    let row0 = sp.world_count + world * sp.max_rows * ROW;
     var n_rows = 0u;
     for (var p = 0u; p < sp.pair_count; p++) {
         let pair = pairs[p];
         let va = view(world, pair.body_a);
+        let vb = view(world, pair.body_b);
         let pw = world * sp.pair_count + p;
         let count = patch_counts[pw];
-        for (var i = 0u; i < count; i++) {
-            let pt = patches[pw * MAX_PATCHES + i];
-            for (var k = 0u; k < 4u; k++) {
-                let c = pt.slots[k];
-                if (c.w < VALID_BELOW && n_rows < sp.max_rows) {
-                    let q = c.xyz + pair.radius * pt.normal.xyz;
-                    let local = quat_rotate(vec4<f32>(-va.rot.xyz, va.rot.w), q - va.pos);
-                    solver_scratch[row0 + 2u * n_rows] = vec4<f32>(local, bitcast<f32>(p));
-                    solver_scratch[row0 + 2u * n_rows + 1u] = vec4<f32>(0.0, 0.0, 0.0, pair.friction);
-                    n_rows += 1u;
+        for (var i = 0u; i < MAX_PATCHES; i++) {
+            if (i < count) {
+                n_rows += build_patch_rows(row0, p, i, pair, va, vb, patches[pw * MAX_PATCHES + i]);
+            } else {
+                // Unused patches: no row there may be matched next frame.
+                for (var k = 0u; k < 4u; k++) {
+                    solver_scratch[row_index(row0, p, i, k)] = vec4<f32>(0.0, 0.0, 0.0, bitcast<f32>(NONE));
                 }
             }
         }
@@ -233,8 +334,9 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
                 body_qd[2u * g] = vec4<f32>(body_qd[2u * g].xyz + sp.gravity.xyz * h, 0.0);
             }
         }
+        sweep(world, row0, h, true, true);
         for (var it = 0u; it < sp.pos_iters; it++) {
-            sweep(world, row0, n_rows, h, true);
+            sweep(world, row0, h, true, false);
         }
         for (var b = 0u; b < sp.body_count; b++) {
             let m = bodies[b];
@@ -249,7 +351,7 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
         for (var it = 0u; it < sp.vel_iters; it++) {
-            sweep(world, row0, n_rows, h, false);
+            sweep(world, row0, h, false, false);
         }
     }
     // A world that went non-finite or faster than max_speed is flagged for the caller to reset.
