@@ -50,6 +50,11 @@ pub struct NutBoltReport {
     /// Wall time of the frames (submission to completion; readbacks for the figures excluded) [s].
     pub wall_s: f64,
     pub ms_per_frame: f64,
+    /// Where the time goes (paper Table I), timed after the run on its last state, each part alone over
+    /// the same number of frames in one submission: contact generation + reduction [ms per frame] ...
+    pub handling_ms_per_frame: f64,
+    /// ... and the solver step on the last frame's contacts [ms per frame].
+    pub solve_ms_per_frame: f64,
     pub pair_seconds_per_wall_second: f64,
     /// Real-time factor of one world.
     pub real_time_factor_per_world: f64,
@@ -113,6 +118,19 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         yaw.update(&s.body_q[0]);
     }
     let (s, _) = solver.read_state(gpu, &pipe);
+    let split = frames.min(10);
+    let time = |record: &dyn Fn(&mut factory_engine::wgpu::CommandEncoder)| {
+        let t = Instant::now();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        for _ in 0..split {
+            record(&mut enc);
+        }
+        gpu.queue.submit([enc.finish()]);
+        gpu.wait();
+        t.elapsed().as_secs_f64() * 1e3 / split as f64
+    };
+    let handling_ms = time(&|enc| pipe.encode(enc));
+    let solve_ms = time(&|enc| solver.encode(enc));
     let sim = frames as f64 * run.solver.dt as f64;
     let k = std::f64::consts::TAU / p as f64;
     let (m, i) = (mp.mass as f64, mp.inertia.z_axis.z as f64);
@@ -132,6 +150,8 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         mu: run.mu,
         wall_s: wall,
         ms_per_frame: wall * 1e3 / frames as f64,
+        handling_ms_per_frame: handling_ms,
+        solve_ms_per_frame: solve_ms,
         pair_seconds_per_wall_second: run.worlds as f64 * sim / wall,
         real_time_factor_per_world: sim / wall,
         nut_descent_mm: (z0 - s.body_q[0].p[2]) as f64 * 1e3,

@@ -10,8 +10,8 @@
 //! Box2D v3): (1) integrate velocities (gravity); (2) `pos_iters` Gauss-Seidel sweeps over the contacts
 //! with a position bias; (3) integrate positions; (4) `vel_iters` sweeps without the penetration bias
 //! (v_n >= 0 for touching contacts, restitution 0). A contact is the reduced contact's point anchored in
-//! the query body; at every sweep its separation s and normal n are re-evaluated by sampling the SDF
-//! shape at the anchor's current position (the SDF is at hand, so no linearisation: a nut that turns 27
+//! the query body; at every substep (positions) and after it (velocities) its separation s and normal n
+//! are re-evaluated by sampling the SDF shape at the anchor's current position (the SDF is at hand, so no linearisation: a nut that turns 27
 //! degrees in one 1/60 s frame would otherwise see its flank contacts, projected on frame-start tangent
 //! planes, penetrate by ~0.4 mm and be pushed back). The normal velocity is driven to v_n >= -s/h when
 //! separated (speculative: approach at most the gap) or to v_n >= min(-s/h, max_depenetration_velocity)
@@ -147,8 +147,11 @@ struct Row {
     /// Impulses of the current substep [N s].
     lambda_n: f32,
     lambda_t: [f32; 2],
-    /// The normal the row was last solved with (None before its first solve).
+    /// The normal the row was last sampled with, world frame (None before its first sample, or when the
+    /// SDF had no gradient there).
     normal: Option<Vec3>,
+    /// The separation at that sample [m].
+    sep: f32,
     /// The contact point in b's body frame at the frame's start [m] (to match the row next frame).
     point_b: Vec3,
 }
@@ -226,6 +229,7 @@ pub fn step_cpu(
                         lambda_n: 0.0,
                         lambda_t: [0.0; 2],
                         normal: None,
+                        sep: 0.0,
                         point_b: qb.inverse() * (c.point - pb),
                     };
                     // Warm start: the closest of them that was the same contact hands over its impulses.
@@ -273,8 +277,10 @@ pub fn step_cpu(
                     vel[r.b][1] -= ib * rb.cross(imp);
                 }
             }
-            for _ in 0..cfg.pos_iters {
-                solve_rows(&mut rows, flat, &pos, &mut vel, &inv_m, &com, &inv_i_world, h, cfg, true);
+            // The poses stand still during the sweeps, so each row's separation and normal are sampled in
+            // the first sweep and reused by the others (sampled again once the bodies have moved).
+            for it in 0..cfg.pos_iters {
+                solve_rows(&mut rows, flat, &pos, &mut vel, &inv_m, &com, &inv_i_world, h, cfg, true, it == 0);
             }
             for i in 0..nb {
                 if inv_m(i) > 0.0 || model.is_kinematic(i) {
@@ -287,8 +293,8 @@ pub fn step_cpu(
                     pos[i] = (c2 - q2 * com(i), q2);
                 }
             }
-            for _ in 0..cfg.vel_iters {
-                solve_rows(&mut rows, flat, &pos, &mut vel, &inv_m, &com, &inv_i_world, h, cfg, false);
+            for it in 0..cfg.vel_iters {
+                solve_rows(&mut rows, flat, &pos, &mut vel, &inv_m, &com, &inv_i_world, h, cfg, false, it == 0);
             }
         }
         warm.rows[w] = rows;
@@ -317,23 +323,36 @@ fn solve_rows(
     h: f32,
     cfg: &SolverConfig,
     bias: bool,
+    resample: bool,
 ) {
     for r in rows.iter_mut() {
         let (pa, qa) = pos[r.a];
         let (pb, qb) = pos[r.b];
         let pair = &flat.pairs[r.pair];
         let x = pa + qa * r.anchor_a;
-        // The SDF shape's frame: body b's pose times the shape's pose on it.
-        let body_b = Xf { p: pb, q: Vec4::from(qb) };
-        let shape_b = body_b
-            .mul(&Xf { p: Vec3::new(pair.b_pos[0], pair.b_pos[1], pair.b_pos[2]), q: Vec4::from_array(pair.b_rot) });
-        let (phi, g) = sdf_sample_cpu(pair, &flat.sdf_values, shape_b.inv().point(x));
-        let glen = g.length();
-        if glen <= 0.0 {
-            continue;
-        }
-        let n = shape_b.rotate(g / glen);
-        let s = phi - pair.radius - cfg.rest_offset;
+        let (n, s) = if resample {
+            // The SDF shape's frame: body b's pose times the shape's pose on it.
+            let body_b = Xf { p: pb, q: Vec4::from(qb) };
+            let shape_b = body_b.mul(&Xf {
+                p: Vec3::new(pair.b_pos[0], pair.b_pos[1], pair.b_pos[2]),
+                q: Vec4::from_array(pair.b_rot),
+            });
+            let (phi, g) = sdf_sample_cpu(pair, &flat.sdf_values, shape_b.inv().point(x));
+            let glen = g.length();
+            if glen <= 0.0 {
+                r.normal = None;
+                continue;
+            }
+            let n = shape_b.rotate(g / glen);
+            r.normal = Some(n);
+            r.sep = phi - pair.radius - cfg.rest_offset;
+            (n, r.sep)
+        } else {
+            match r.normal {
+                Some(n) => (n, r.sep),
+                None => continue,
+            }
+        };
         // The contact point on a's surface.
         let xa = x - pair.radius * n;
         let ra = xa - (pa + qa * com(r.a));
@@ -355,7 +374,6 @@ fn solve_rows(
         if k <= 0.0 {
             continue;
         }
-        r.normal = Some(n);
         // Normal: speculative when separated, bounded depenetration when penetrating.
         let target = if s > 0.0 {
             -s / h

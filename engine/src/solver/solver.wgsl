@@ -1,7 +1,8 @@
 // Rigid-body step on the GPU (WGSL twin of solver::step_cpu; see solver/mod.rs for the scheme): one
 // invocation per world, because Gauss-Seidel is serial inside a world and the worlds are independent.
 // Prepended by the host: contact/common.wgsl (Pair, Transform, PatchOut, quaternion helpers), and appended:
-// contact/sdf_sample.wgsl and sdf/thread.wgsl (the SDF is re-sampled at every contact in every sweep).
+// contact/sdf_sample.wgsl and sdf/thread.wgsl (the SDF is re-sampled at every contact once per substep for
+// the position sweeps and once for the velocity sweeps).
 //
 // On a GPU one invocation per world keeps a warp busy with 32 worlds: fine for the thousands of worlds of
 // RL training, poor for one world with many contacts (graph colouring would be the next step there).
@@ -32,8 +33,8 @@ struct Body {
 }
 
 // A contact row: anchor (query element point in body a's frame) xyz + pair index (bits) w; accumulated
-// impulses of the current move (normal, tangent 1, tangent 2) xyz and friction coefficient w; the normal
-// it was last solved with xyz (w = 1 once solved); the contact point in body b's frame at the frame's start
+// impulses of the current substep (normal, tangent 1, tangent 2) xyz and friction coefficient w; the normal
+// and separation of the last SDF sample (zero normal: none yet); the contact point in body b's frame at the frame's start
 // xyz (for matching the row next frame).
 struct Row {
     anchor: vec4<f32>,
@@ -145,7 +146,7 @@ fn friction_row(va: BodyView, vb: BodyView, ra: vec3<f32>, rb: vec3<f32>, t: vec
     return new_t;
 }
 
-fn solve_row(world: u32, ri: u32, h: f32, bias: bool) {
+fn solve_row(world: u32, ri: u32, h: f32, bias: bool, resample: bool) {
     let anchor = solver_scratch[ri];
     if (bitcast<u32>(anchor.w) == NONE) {
         return; // an empty slot of its patch
@@ -155,14 +156,27 @@ fn solve_row(world: u32, ri: u32, h: f32, bias: bool) {
     let va = view(world, pair.body_a);
     let vb = view(world, pair.body_b);
     let x = va.pos + quat_rotate(va.rot, anchor.xyz);
-    let shape_b = xf_mul(Transform(vec4<f32>(vb.pos, 0.0), vb.rot), Transform(pair.b_pos, pair.b_rot));
-    let s0 = sdf_sample(pair, xf_point(xf_inv(shape_b), x));
-    let glen = length(s0.g);
-    if (glen <= 0.0) {
-        return;
+    var n: vec3<f32>;
+    var s: f32;
+    if (resample) {
+        let shape_b = xf_mul(Transform(vec4<f32>(vb.pos, 0.0), vb.rot), Transform(pair.b_pos, pair.b_rot));
+        let s0 = sdf_sample(pair, xf_point(xf_inv(shape_b), x));
+        let glen = length(s0.g);
+        if (glen <= 0.0) {
+            solver_scratch[ri + 2u] = vec4<f32>(0.0);
+            return;
+        }
+        n = quat_rotate(shape_b.q, s0.g / glen);
+        s = s0.d - pair.radius - sp.rest_offset;
+        solver_scratch[ri + 2u] = vec4<f32>(n, s);
+    } else {
+        let ns = solver_scratch[ri + 2u];
+        if (all(ns.xyz == vec3<f32>(0.0))) {
+            return;
+        }
+        n = ns.xyz;
+        s = ns.w;
     }
-    let n = quat_rotate(shape_b.q, s0.g / glen);
-    let s = s0.d - pair.radius - sp.rest_offset;
     let xa = x - pair.radius * n;
     let ra = xa - (va.pos + quat_rotate(va.rot, va.com));
     let rb = xa - (vb.pos + quat_rotate(vb.rot, vb.com));
@@ -192,7 +206,6 @@ fn solve_row(world: u32, ri: u32, h: f32, bias: bool) {
         lambda.z = friction_row(va, vb, ra, rb, t2, lambda.z, limit);
     }
     solver_scratch[ri + 1u] = lambda;
-    solver_scratch[ri + 2u] = vec4<f32>(n, 1.0);
 }
 
 // Warm start of one row at the start of a substep: re-applies the impulses of the previous substep (or of
@@ -201,7 +214,7 @@ fn warm_row(world: u32, ri: u32) {
     let anchor = solver_scratch[ri];
     let nw = solver_scratch[ri + 2u];
     let lambda = solver_scratch[ri + 1u];
-    if (bitcast<u32>(anchor.w) == NONE || nw.w == 0.0 || all(lambda.xyz == vec3<f32>(0.0))) {
+    if (bitcast<u32>(anchor.w) == NONE || all(nw.xyz == vec3<f32>(0.0)) || all(lambda.xyz == vec3<f32>(0.0))) {
         return;
     }
     let pair = pairs[bitcast<u32>(anchor.w)];
@@ -258,7 +271,7 @@ fn build_patch_rows(row0: u32, p: u32, i: u32, pair: Pair, va: BodyView, vb: Bod
         var best = tol;
         var found = false;
         for (var j = 0u; j < 4u; j++) {
-            if (bitcast<u32>(old_a[j].w) == p && old_n[j].w != 0.0 && dot(old_n[j].xyz, pt.normal.xyz) >= WARM_COS) {
+            if (bitcast<u32>(old_a[j].w) == p && any(old_n[j].xyz != vec3<f32>(0.0)) && dot(old_n[j].xyz, pt.normal.xyz) >= WARM_COS) {
                 let d = distance(old_a[j].xyz, local);
                 if (d <= tol && distance(old_b[j].xyz, pb) <= tol && (!found || d < best)) {
                     best = d;
@@ -279,7 +292,7 @@ fn build_patch_rows(row0: u32, p: u32, i: u32, pair: Pair, va: BodyView, vb: Bod
 
 // One pass over the world's rows in order (pair, patch, slot), four rows (one patch) per loop pass
 // (lavapipe budgets loop passes): a Gauss-Seidel sweep (warm = false) or the warm start (warm = true).
-fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool) {
+fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool, resample: bool) {
     for (var p = 0u; p < sp.pair_count; p++) {
         let count = patch_counts[world * sp.pair_count + p];
         for (var i = 0u; i < count; i++) {
@@ -290,10 +303,10 @@ fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool) {
                 warm_row(world, g0 + 2u * ROW);
                 warm_row(world, g0 + 3u * ROW);
             } else {
-                solve_row(world, g0, h, bias);
-                solve_row(world, g0 + ROW, h, bias);
-                solve_row(world, g0 + 2u * ROW, h, bias);
-                solve_row(world, g0 + 3u * ROW, h, bias);
+                solve_row(world, g0, h, bias, resample);
+                solve_row(world, g0 + ROW, h, bias, resample);
+                solve_row(world, g0 + 2u * ROW, h, bias, resample);
+                solve_row(world, g0 + 3u * ROW, h, bias, resample);
             }
         }
     }
@@ -334,9 +347,10 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
                 body_qd[2u * g] = vec4<f32>(body_qd[2u * g].xyz + sp.gravity.xyz * h, 0.0);
             }
         }
-        sweep(world, row0, h, true, true);
+        sweep(world, row0, h, true, true, false);
+        // The poses stand still during the sweeps: the first samples each row's SDF, the others reuse it.
         for (var it = 0u; it < sp.pos_iters; it++) {
-            sweep(world, row0, h, true, false);
+            sweep(world, row0, h, true, false, it == 0u);
         }
         for (var b = 0u; b < sp.body_count; b++) {
             let m = bodies[b];
@@ -351,7 +365,7 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
         for (var it = 0u; it < sp.vel_iters; it++) {
-            sweep(world, row0, h, false, false);
+            sweep(world, row0, h, false, false, it == 0u);
         }
     }
     // A world that went non-finite or faster than max_speed is flagged for the caller to reset.
