@@ -63,6 +63,9 @@ enum Cmd {
         pos_iters: u32,
         #[arg(long, default_value_t = 1)]
         vel_iters: u32,
+        /// Gauss-Seidel passes over each contact patch per sweep (SolverConfig::patch_iters).
+        #[arg(long, default_value_t = factory_engine::solver::SolverConfig::default().patch_iters)]
+        patch_iters: u32,
         /// Bolt SDF: `analytic` or a grid resolution (e.g. 256).
         #[arg(long, default_value = "analytic")]
         sdf_res: String,
@@ -210,6 +213,7 @@ fn main() -> Result<()> {
             substeps,
             pos_iters,
             vel_iters,
+            patch_iters,
             sdf_res,
             patches,
             mu,
@@ -235,6 +239,7 @@ fn main() -> Result<()> {
                     substeps,
                     pos_iters,
                     vel_iters,
+                    patch_iters,
                     ..Default::default()
                 },
                 mu,

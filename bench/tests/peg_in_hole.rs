@@ -38,8 +38,16 @@ const BOTTOM_TOL: f32 = 0.02e-3;
 /// sampled peg SDF (256 samples over 50 mm: 0.2 mm voxels; trilinear error on a 2 mm cylinder ~h^2/(8 r)
 /// = 2.5 um, and the 16-bit quantum is 0.8 um).
 const SDF_SLACK: f32 = 5e-6;
-/// Aligned drop: at rest means slower than this [m/s] after 1 s.
+/// Aligned drop: at rest means a median frame-end speed below this [m/s] over the second second ...
 const REST_SPEED: f32 = 1e-3;
+/// ... and a centre of mass that moves less than this [m] in that second.
+const REST_DRIFT: f32 = 0.05e-3;
+/// Gauss-Seidel passes per contact patch and sweep (`SolverConfig::patch_iters`; the solver's module doc):
+/// at 1, the peg standing on the table rocks and topples (below).
+const PATCH_ITERS: u32 = 8;
+/// Standing on the table: the peg's axis stays within this of vertical [deg] (tipping over starts at
+/// atan(1.5 mm bottom radius / 25 mm COM height) = 3.4 deg).
+const STANDING_TILT_DEG: f32 = 1.0;
 
 /// Tilt of the jammed peg [deg] and the push.
 const JAM_TILT_DEG: f32 = 6.0;
@@ -74,15 +82,32 @@ fn scene() -> ContactModel {
     ContactModel { body_count: 1, pairs: vec![a, b] }
 }
 
+/// Solver settings of the peg scenes: Factory's task settings (DESIGN 4.4) with PATCH_ITERS passes per
+/// patch and sweep.
+fn solver_config() -> SolverConfig {
+    SolverConfig { substeps: 2, pos_iters: 16, vel_iters: 1, patch_iters: PATCH_ITERS, ..Default::default() }
+}
+
 /// Runs the peg from `start` for `frames` under `gravity` [m/s^2]; returns the final state.
 fn run(start: &BodyState, gravity: f32, frames: u32, on_gpu: bool) -> BodyState {
+    run_in(&scene(), start, gravity, frames, on_gpu, |_| {})
+}
+
+/// Runs the peg in `model` from `start`; `each` sees the state after every frame (GPU: read back each frame).
+fn run_in(
+    model: &ContactModel,
+    start: &BodyState,
+    gravity: f32,
+    frames: u32,
+    on_gpu: bool,
+    mut each: impl FnMut(&BodyState),
+) -> BodyState {
     let gpu = GpuContext::global().unwrap();
-    let model = scene();
-    let pipe = ContactPipeline::new(gpu, &model, 1, &ContactConfig::default()).unwrap();
+    let pipe = ContactPipeline::new(gpu, model, 1, &ContactConfig::default()).unwrap();
     let mp = parts().peg.mass_properties;
     let mut bodies = BodyModel { gravity: Vec3::new(0.0, 0.0, -gravity), ..Default::default() };
     bodies.add_dynamic(mp.mass, mp.inertia, mp.com);
-    let cfg = SolverConfig { substeps: 2, pos_iters: 16, vel_iters: 1, ..Default::default() };
+    let cfg = solver_config();
     let solver = GpuSolver::new(gpu, &pipe, &bodies, &cfg).unwrap();
     let mut state = start.clone();
     solver.write_state(gpu, &pipe, &state);
@@ -90,22 +115,51 @@ fn run(start: &BodyState, gravity: f32, frames: u32, on_gpu: bool) -> BodyState 
     for f in 0..frames {
         if on_gpu {
             solver.submit_frame(gpu, &pipe);
-            if f + 1 == frames {
-                let (s, ok) = solver.read_state(gpu, &pipe);
-                assert!(ok[0], "GPU solver: world diverged");
-                state = s;
-            }
+            let (s, ok) = solver.read_state(gpu, &pipe);
+            assert!(ok[0], "GPU solver: world diverged (frame {f})");
+            state = s;
         } else {
             pipe.write_body_q(gpu, &state.body_q);
             pipe.run(gpu);
             let contacts = pipe.read(gpu);
             assert!(
                 step_cpu(&bodies, &mut state, &contacts, &pipe.flat, &cfg, &mut warm)[0],
-                "CPU reference: world diverged"
+                "CPU reference: world diverged (frame {f})"
             );
         }
+        each(&state);
     }
     state
+}
+
+/// Regression: with plain Gauss-Seidel (patch_iters 1) a 4 mm peg set down upright on the table (50 mm tall,
+/// on a 3 mm bottom face) rocked at 0.2-0.5 rad/s and toppled within 1.5 s (max tilt 101 deg over 3 s), on the
+/// GPU solver and the CPU reference; at 8 passes per patch it stands (max tilt 0.11 deg).
+#[test]
+fn a_peg_standing_on_the_table_stays_upright() {
+    let ph = parts();
+    let cache = SdfCache::new(SdfCache::default_dir());
+    let peg = ShapeDesc::new(0, ShapeGeometry::Revolved { mesh: Arc::new(ph.peg.mesh.clone()), sdf: ph.peg_sdf() });
+    let table = ShapeDesc::fixed((Vec3::ZERO, Quat::IDENTITY), ShapeGeometry::Plane);
+    let mut pair = pair_spec(&peg, &table, TABLE_OFFSET, &cache).unwrap();
+    pair.friction = FRICTION;
+    let model = ContactModel { body_count: 1, pairs: vec![pair] };
+    // Set down 0.5 mm above the table, upright.
+    let start = BodyState {
+        body_q: vec![TransformGpu::new(Vec3::new(0.0, 0.0, 0.5e-3), Quat::IDENTITY)],
+        body_qd: vec![[Vec3::ZERO; 2]],
+    };
+    for on_gpu in [true, false] {
+        let mut worst = 0.0f32;
+        let end = run_in(&model, &start, G, 180, on_gpu, |s| worst = worst.max(tilt_deg(s)));
+        eprintln!(
+            "{}: largest tilt over 3 s {worst:.3} deg, final speed {:.2e} m/s",
+            who(on_gpu),
+            end.body_qd[0][0].length()
+        );
+        assert!(worst < STANDING_TILT_DEG, "{}: tilted {worst} deg", who(on_gpu));
+        assert!(axis_point(&end, 0.0).z.abs() < BOTTOM_TOL, "{}: bottom at {} m", who(on_gpu), axis_point(&end, 0.0).z);
+    }
 }
 
 fn who(on_gpu: bool) -> &'static str {
@@ -161,11 +215,11 @@ fn an_aligned_peg_drops_into_the_hole_and_rests_on_the_bottom() {
     }
 }
 
-/// The same drop must also come to rest.
+/// The same drop must also come to rest: over its second second the peg's centre of mass moves less than
+/// REST_DRIFT and its frame-end speed stays below REST_SPEED in most frames (median; the peg rocks in place
+/// by hundredths of a degree, which shows as single frames up to ~1.5 mm/s at its centre of mass).
+/// Regression: with patch_iters 1 it rattled at 6-20 mm/s, tilt wandering 0.15-0.5 deg, spin up to 1 rad/s.
 #[test]
-#[ignore = "the peg rattles in the bore instead of resting: after 1 s (and 2 s) its centre of mass still moves \
-            at 6-20 mm/s, tilt wandering 0.15-0.5 deg, spin about its axis up to 1 rad/s, while its bottom stays \
-            within +-15 um of the table (GPU solver; the bound is 1 mm/s)"]
 fn an_aligned_peg_dropped_into_the_hole_comes_to_rest() {
     let hole_top = factory_assets::peg_hole::HOLE_HEIGHT as f32;
     let start = BodyState {
@@ -173,20 +227,36 @@ fn an_aligned_peg_dropped_into_the_hole_comes_to_rest() {
         body_qd: vec![[Vec3::ZERO; 2]],
     };
     for on_gpu in [true, false] {
-        let end = run(&start, G, 60, on_gpu);
-        let speed = end.body_qd[0][0].length();
-        eprintln!("{}: speed after 1 s {speed:.2e} m/s, tilt {:.3} deg", who(on_gpu), tilt_deg(&end));
-        assert!(speed < REST_SPEED, "{}: still moving at {speed} m/s", who(on_gpu));
+        let mut track: Vec<(Vec3, f32, f32)> = Vec::new();
+        run_in(&scene(), &start, G, 120, on_gpu, |s| {
+            let com = axis_point(s, 0.5 * factory_assets::peg_hole::PEG_LENGTH as f32);
+            track.push((com, s.body_qd[0][0].length(), tilt_deg(s)));
+        });
+        let last = &track[60..];
+        let drift = (last[last.len() - 1].0 - last[0].0).length();
+        let mut speeds: Vec<f32> = last.iter().map(|t| t.1).collect();
+        speeds.sort_by(f32::total_cmp);
+        let (median, fastest) = (speeds[speeds.len() / 2], speeds[speeds.len() - 1]);
+        let tilt = last.iter().map(|t| t.2).fold(0.0f32, f32::max);
+        eprintln!(
+            "{}: second second: centre of mass moved {:.4} mm, speed median {median:.2e} max {fastest:.2e} m/s, \
+             largest tilt {tilt:.3} deg",
+            who(on_gpu),
+            drift * 1e3
+        );
+        assert!(drift < REST_DRIFT, "{}: moved {drift} m in the second second", who(on_gpu));
+        assert!(median < REST_SPEED, "{}: median speed {median} m/s", who(on_gpu));
     }
 }
 
 #[test]
-#[ignore = "the bore does not hold a tilted peg. Started at rest 0.3 mm inside the mouth, 6 deg, pushed at 3 g: \
-            after 3 frames it is tilted 18 deg with its bottom 2.6 mm inside the bore (the 52 um radial clearance \
-            allows 0.66 deg: it has gone through the wall), at 47 deg after 6 frames, then is thrown out \
-            (163 rad/s) and ends lying on the block. Dropped instead from 1 mm above at 3 g + 0.05 m/s, it is \
-            turned upright within 3 frames (6 -> 1.6 deg) and slides to the table (8.998 mm deep). GPU solver; \
-            hole queried (one candidate per 9 mm bore triangle) against the peg's 256 SDF."]
+#[ignore = "the bore does not hold a tilted peg: started at rest 0.3 mm inside the mouth, 6 deg, pushed at 3 g, it is \
+            levered out over the rim and ends lying on the block (tilt 90 deg; GPU solver and CPU reference). Found \
+            2026-11-22: (1) one contact candidate per 9 mm bore triangle misses the peg's corner lower on the wall \
+            (TriMesh::split_long_triangles at 0.5 mm finds it, 4.6 um away); (2) even started at the two-point \
+            contact pose (1.48 mm deep) with the split bore and patch_iters 8, the push through the centre of mass, \
+            2.6 mm outboard of the rim, tips it out within 4 frames (7 -> 45 deg) with the corner sliding up the \
+            wall. Pushing along the peg's axis, as an insertion does, needs an external-force API (not built)."]
 fn a_tilted_peg_pushed_into_the_hole_jams() {
     let hole_top = factory_assets::peg_hole::HOLE_HEIGHT as f32;
     let tilt = JAM_TILT_DEG.to_radians();

@@ -84,6 +84,34 @@ impl TriMesh {
         TriMesh { positions: self.positions.iter().map(|p| f(*p)).collect(), triangles: self.triangles.clone() }
     }
 
+    /// The same surface with every triangle whose longest edge exceeds `max_edge` [m] bisected at that
+    /// edge's midpoint, recursively. Meant for a mesh whose triangles are *queried* for contacts (one
+    /// candidate per triangle, paper III-A): a long, thin triangle (a 9 mm bore wall facet) yields one
+    /// point where it needs several (the rim and a tilted peg's corner lower down). Neighbours are split
+    /// independently, so the result may have T-junctions: do not use it for mass properties or baking.
+    pub fn split_long_triangles(&self, max_edge: f32) -> TriMesh {
+        assert!(max_edge > 0.0 && max_edge.is_finite(), "max_edge must be > 0, got {max_edge}");
+        let mut positions = self.positions.clone();
+        let mut out = Vec::with_capacity(self.triangles.len());
+        let mut stack: Vec<[u32; 3]> = self.triangles.iter().rev().copied().collect();
+        while let Some(t) = stack.pop() {
+            let p = t.map(|i| positions[i as usize]);
+            let len2 = [(p[1] - p[0]).length_squared(), (p[2] - p[1]).length_squared(), (p[0] - p[2]).length_squared()];
+            let e = (0..3).max_by(|&a, &b| len2[a].total_cmp(&len2[b])).unwrap();
+            if len2[e] <= max_edge * max_edge {
+                out.push(t);
+                continue;
+            }
+            // Edge e runs from corner e to corner e + 1; the opposite corner is e + 2.
+            let (a, b, c) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
+            let m = positions.len() as u32;
+            positions.push(0.5 * (positions[a as usize] + positions[b as usize]));
+            stack.push([m, b, c]);
+            stack.push([a, m, c]);
+        }
+        TriMesh::new(positions, out)
+    }
+
     /// Appends another mesh (its indices shifted).
     pub fn append(&mut self, other: &TriMesh) {
         let base = self.positions.len() as u32;
@@ -318,6 +346,29 @@ pub fn box_mesh(h: Vec3) -> TriMesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn splitting_long_triangles_keeps_the_surface_and_bounds_every_edge() {
+        let m = box_mesh(Vec3::new(0.01, 0.002, 0.0005));
+        let s = m.split_long_triangles(0.001);
+        let area = |m: &TriMesh| -> f32 {
+            (0..m.triangle_count())
+                .map(|t| {
+                    let [a, b, c] = m.triangle(t);
+                    0.5 * (b - a).cross(c - a).length()
+                })
+                .sum()
+        };
+        assert!((area(&s) - area(&m)).abs() < 1e-4 * area(&m), "area {} vs {}", area(&s), area(&m));
+        assert!(s.triangle_count() > 10 * m.triangle_count());
+        for t in 0..s.triangle_count() {
+            let [a, b, c] = s.triangle(t);
+            let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+            assert!(longest <= 0.001 + 1e-9, "triangle {t}: edge {longest}");
+            // Orientation kept: every normal still points away from the box centre.
+            assert!((b - a).cross(c - a).dot((a + b + c) / 3.0) > 0.0, "triangle {t} flipped");
+        }
+    }
 
     #[test]
     fn box_is_watertight_with_exact_mass_properties() {

@@ -6,8 +6,12 @@ use super::ContactConfig;
 use glam::{Vec3, Vec4};
 
 pub(crate) const COMMON_WGSL: &str = include_str!("common.wgsl");
-pub(crate) const GENERATE_WGSL: &str =
-    concat!(include_str!("generate.wgsl"), include_str!("sdf_sample.wgsl"), include_str!("../sdf/thread.wgsl"));
+pub(crate) const GENERATE_WGSL: &str = concat!(
+    include_str!("generate.wgsl"),
+    include_str!("sdf_sample.wgsl"),
+    include_str!("../sdf/thread.wgsl"),
+    include_str!("../sdf/revolved.wgsl")
+);
 
 /// The WGSL module of a kernel with the patch budget substituted and the default workgroup size (for
 /// kernels that do not reduce: normals, solver).
@@ -136,6 +140,13 @@ pub fn sdf_sample_cpu(pair: &PairGpu, sdf_values: &[u32], p: Vec3) -> (f32, Vec3
         let base = pair.sdf_dims[3] as usize;
         return crate::sdf::thread::ThreadSdf::from_words(&sdf_values[base..base + crate::sdf::thread::THREAD_WORDS])
             .sample(p);
+    }
+    if pair.sdf_kind == 3 {
+        let base = pair.sdf_dims[3] as usize;
+        return crate::sdf::revolved::RevolvedSdf::from_words(
+            &sdf_values[base..base + crate::sdf::revolved::REVOLVED_WORDS],
+        )
+        .sample(p);
     }
     let lo = Vec3::new(pair.sdf_origin[0], pair.sdf_origin[1], pair.sdf_origin[2]);
     let dims = glam::UVec3::new(pair.sdf_dims[0], pair.sdf_dims[1], pair.sdf_dims[2]);

@@ -20,6 +20,8 @@ pub enum SdfShape {
     Plane,
     /// The analytic SDF of a threaded bolt (procedural parts; exact where a grid is not).
     Thread(crate::sdf::thread::ThreadSdf),
+    /// The analytic SDF of a solid of revolution (round pegs: exactly round where a grid is faceted).
+    Revolved(crate::sdf::revolved::RevolvedSdf),
 }
 
 /// The shape whose triangles are queried: triangles in the shape frame [m] plus a radius [m].
@@ -222,6 +224,11 @@ impl ContactModel {
                     let base = flat.sdf_values.len() as u32;
                     flat.sdf_values.extend_from_slice(&t.to_words());
                     (2u32, [0.0; 4], [2, 2, 2, base], 0.0)
+                }
+                SdfShape::Revolved(r) => {
+                    let base = flat.sdf_values.len() as u32;
+                    flat.sdf_values.extend_from_slice(&r.to_words());
+                    (3u32, [0.0; 4], [2, 2, 2, base], 0.0)
                 }
                 SdfShape::Grid(g) => {
                     let key = Arc::as_ptr(g);

@@ -5,8 +5,12 @@ use super::model::{FlatModel, PatchGpu};
 use super::ContactConfig;
 use glam::Vec3;
 
-pub(crate) const NORMALS_WGSL: &str =
-    concat!(include_str!("normals.wgsl"), include_str!("sdf_sample.wgsl"), include_str!("../sdf/thread.wgsl"));
+pub(crate) const NORMALS_WGSL: &str = concat!(
+    include_str!("normals.wgsl"),
+    include_str!("sdf_sample.wgsl"),
+    include_str!("../sdf/thread.wgsl"),
+    include_str!("../sdf/revolved.wgsl")
+);
 
 /// Invocations per workgroup along the contact slots.
 pub const NORMALS_WG: u32 = 64;

@@ -15,6 +15,13 @@ const IDX_MASK: u32 = 0x3ff;
 /// Slots 1-3 of a patch take no contact more than this fraction of the contact offset above both its
 /// deepest contact and the surface (as `DEPTH_BAND` in common.wgsl).
 pub const DEPTH_BAND: f32 = 0.25;
+/// ... and no more than the deepest contact's distance from the surface (penetration or gap), or this [m]
+/// if that is less (as `MIN_DEPTH_BAND` in common.wgsl): a patch that rests on its surface keeps its slots
+/// on what carries the load. Regression: a chamfered 4 mm peg standing on a table at a 10 mm contact offset
+/// (band 2.5 mm) got one contact on its bottom face and three on the chamfer's upper rim, 0.5 mm higher and
+/// wider apart, every frame; it stood on that single point and toppled. A falling or deeply penetrating
+/// patch still takes corners up to its deepest contact's distance above it (a tilted box landing).
+pub const MIN_DEPTH_BAND: f32 = 1e-4;
 const UNASSIGNED: u32 = u32::MAX - 1;
 const NONE: u32 = u32::MAX;
 
@@ -76,7 +83,7 @@ impl Reducer {
             return -depth;
         }
         let s0 = self.slots[p][0];
-        if depth > s0.w.max(0.0) + band {
+        if depth > s0.w.max(0.0) + band.min(s0.w.abs().max(MIN_DEPTH_BAND)) {
             return NEG_INF;
         }
         if k == 1 {

@@ -15,6 +15,7 @@
 //! | tagged mesh / tagged mesh | the mesh with more triangles, baked at its own resolution | the other mesh's triangles |
 //! | tagged mesh / untagged mesh | the tagged mesh at its resolution | the untagged mesh's convex hull |
 //! | tagged mesh / box, sphere, capsule | the tagged mesh at its resolution | the primitive ([`QueryShape::cuboid`], [`QueryShape::sphere`], [`QueryShape::capsule`]) |
+//! | exact solid of revolution ([`ShapeGeometry::Revolved`]) / any mesh or primitive | the exact field ([`SdfShape::Revolved`]; both exact: more triangles) | as against a tagged mesh |
 //! | anything / plane | [`SdfShape::Plane`] (exact) | a primitive as above; a tagged mesh's triangles; an untagged mesh's hull |
 //! | untagged mesh / untagged mesh (convex-convex) | the hull with more triangles, baked at [`CONVEX_SDF_RESOLUTION`] | the other hull |
 //! | untagged mesh / box, sphere, capsule | the mesh's hull at [`CONVEX_SDF_RESOLUTION`] | the primitive |
@@ -58,6 +59,10 @@ pub enum ShapeGeometry {
     /// `<sdf resolution="n"/>` tag (an SDF with n samples along its longest axis); `None`, untagged (it
     /// collides through its convex hull).
     Mesh { mesh: Arc<TriMesh>, sdf_resolution: Option<u32> },
+    /// A solid of revolution known exactly: its mesh [m] (queried, and for mass properties) and the
+    /// analytic field of its profile (used wherever the shape is the SDF; no bake). It counts as a tagged
+    /// mesh that wins the SDF role against any mesh without an exact field (an exact field beats a grid).
+    Revolved { mesh: Arc<TriMesh>, sdf: crate::sdf::revolved::RevolvedSdf },
     /// The half-space z <= 0 (a table or the ground; normal +z).
     Plane,
     /// A box centred at the origin, half extents [m].
@@ -97,6 +102,7 @@ enum Kind<'a> {
     Primitive,
     Tagged(&'a Arc<TriMesh>, u32),
     Untagged(&'a Arc<TriMesh>),
+    Exact(&'a Arc<TriMesh>, &'a crate::sdf::revolved::RevolvedSdf),
 }
 
 fn bad(field: &'static str, value: String, expected: &str) -> EngineError {
@@ -131,19 +137,20 @@ fn check_shape<'a>(s: &'a ShapeDesc, which: &str) -> Result<Kind<'a>> {
             }
             Kind::Primitive
         }
-        ShapeGeometry::Mesh { mesh, sdf_resolution } => {
-            if mesh.triangle_count() == 0 || mesh.positions.iter().any(|p| !p.is_finite()) {
-                return Err(bad(
-                    "mesh",
-                    format!("{} triangles ({which} shape)", mesh.triangle_count()),
-                    "at least one triangle and finite vertices",
-                ));
-            }
-            match sdf_resolution {
-                Some(r) => Kind::Tagged(mesh, *r),
-                None => Kind::Untagged(mesh),
-            }
+        ShapeGeometry::Mesh { mesh, .. } | ShapeGeometry::Revolved { mesh, .. }
+            if mesh.triangle_count() == 0 || mesh.positions.iter().any(|p| !p.is_finite()) =>
+        {
+            return Err(bad(
+                "mesh",
+                format!("{} triangles ({which} shape)", mesh.triangle_count()),
+                "at least one triangle and finite vertices",
+            ));
         }
+        ShapeGeometry::Mesh { mesh, sdf_resolution } => match sdf_resolution {
+            Some(r) => Kind::Tagged(mesh, *r),
+            None => Kind::Untagged(mesh),
+        },
+        ShapeGeometry::Revolved { mesh, sdf } => Kind::Exact(mesh, sdf),
     })
 }
 
@@ -255,11 +262,30 @@ pub fn pair_spec(a: &ShapeDesc, b: &ShapeDesc, contact_offset: f32, cache: &SdfC
             let sdf = if matches!(kinds[1], Kind::Plane) { 1 } else { 0 };
             let query = match kinds[1 - sdf] {
                 Kind::Primitive => primitive_query(&shapes[1 - sdf].geometry),
-                Kind::Tagged(mesh, _) => QueryShape::mesh(mesh),
+                Kind::Tagged(mesh, _) | Kind::Exact(mesh, _) => QueryShape::mesh(mesh),
                 Kind::Untagged(mesh) => QueryShape::mesh(&convex_hull(mesh, false)?),
                 Kind::Plane => unreachable!(),
             };
             (sdf, SdfShape::Plane, query)
+        }
+        // An exact field is the SDF (both exact: Factory's triangle-count rule); the other shape is queried
+        // as it would be against a tagged mesh.
+        [Kind::Exact(m0, f0), Kind::Exact(m1, f1)] => {
+            let PairRole::SdfMesh { sdf, query } = pair_role([true, true], [m0.triangle_count(), m1.triangle_count()])
+            else {
+                unreachable!("both tagged")
+            };
+            (sdf, SdfShape::Revolved([f0, f1][sdf].clone()), QueryShape::mesh([m0, m1][query]))
+        }
+        [Kind::Exact(_, f), other] | [other, Kind::Exact(_, f)] => {
+            let sdf = if matches!(kinds[0], Kind::Exact(..)) { 0 } else { 1 };
+            let query = match other {
+                Kind::Primitive => primitive_query(&shapes[1 - sdf].geometry),
+                Kind::Tagged(mesh, _) => QueryShape::mesh(mesh),
+                Kind::Untagged(mesh) => QueryShape::mesh(&convex_hull(mesh, false)?),
+                Kind::Plane | Kind::Exact(..) => unreachable!("handled above"),
+            };
+            (sdf, SdfShape::Revolved(f.clone()), query)
         }
         [Kind::Tagged(m0, r0), Kind::Tagged(m1, r1)] => {
             let PairRole::SdfMesh { sdf, query } = pair_role([true, true], [m0.triangle_count(), m1.triangle_count()])

@@ -17,13 +17,16 @@ fn sdf_at(pair: Pair, i: u32, j: u32, k: u32) -> f32 {
 
 // Trilinear value and its exact gradient; outside the grid box the distance to the box is added.
 // Mirrors SdfGrid::sample (kind 0), the half-space z < 0 of the shape frame (kind 1) and the analytic
-// threaded bolt (kind 2, thread.wgsl).
+// threaded bolt (kind 2, thread.wgsl) and the solid of revolution (kind 3, revolved.wgsl).
 fn sdf_sample(pair: Pair, p: vec3<f32>) -> Sample {
     if (pair.sdf_kind == 1u) {
         return Sample(p.z, vec3<f32>(0.0, 0.0, 1.0));
     }
     if (pair.sdf_kind == 2u) {
         return thread_sample(pair.sdf_dims.w, p);
+    }
+    if (pair.sdf_kind == 3u) {
+        return revolved_sample(pair.sdf_dims.w, p);
     }
     let lo = pair.sdf_origin.xyz;
     let h = pair.sdf_origin.w;

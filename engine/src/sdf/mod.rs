@@ -7,6 +7,7 @@
 
 pub mod bake;
 pub mod cache;
+pub mod revolved;
 pub mod thread;
 
 use glam::{UVec3, Vec3};

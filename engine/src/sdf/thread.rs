@@ -55,7 +55,7 @@ pub const THREAD_WORDS: usize = 12;
 const SQRT3: f32 = 1.732_050_8;
 
 /// Closest point to `x` on segment (a, b) and whether it lies strictly inside the segment.
-fn seg_closest(x: Vec2, a: Vec2, b: Vec2) -> (Vec2, bool) {
+pub(crate) fn seg_closest(x: Vec2, a: Vec2, b: Vec2) -> (Vec2, bool) {
     let ab = b - a;
     let t = ((x - a).dot(ab) / ab.dot(ab)).clamp(0.0, 1.0);
     (a + ab * t, t > 0.0 && t < 1.0)
@@ -64,7 +64,7 @@ fn seg_closest(x: Vec2, a: Vec2, b: Vec2) -> (Vec2, bool) {
 /// Signed distance and gradient of a 2D field from its closest boundary point `c`. When `c` is inside a
 /// segment the gradient is that segment's outward `normal` (exact, and free of the cancellation error of
 /// x - c near the surface); at a corner it is the direction from the corner.
-fn signed_from_closest(x: Vec2, c: (Vec2, bool), inside: bool, normal: Vec2) -> (f32, Vec2) {
+pub(crate) fn signed_from_closest(x: Vec2, c: (Vec2, bool), inside: bool, normal: Vec2) -> (f32, Vec2) {
     let d = x - c.0;
     let len = d.length();
     let sgn = if inside { -1.0 } else { 1.0 };

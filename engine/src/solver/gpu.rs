@@ -11,7 +11,8 @@ use bytemuck::{Pod, Zeroable};
 pub(crate) const SOLVER_WGSL: &str = concat!(
     include_str!("solver.wgsl"),
     include_str!("../contact/sdf_sample.wgsl"),
-    include_str!("../sdf/thread.wgsl")
+    include_str!("../sdf/thread.wgsl"),
+    include_str!("../sdf/revolved.wgsl")
 );
 
 /// Invocations (worlds) per workgroup.
@@ -32,7 +33,7 @@ pub struct SolverParamsGpu {
     pub max_depenetration_velocity: f32,
     pub rest_offset: f32,
     pub max_speed: f32,
-    pub _pad: u32,
+    pub patch_iters: u32,
     pub gravity: [f32; 4],
 }
 
@@ -61,6 +62,9 @@ impl SolverConfig {
         }
         if self.pos_iters == 0 {
             return bad("pos_iters", "0".into(), "at least 1");
+        }
+        if self.patch_iters == 0 {
+            return bad("patch_iters", "0".into(), "at least 1");
         }
         if !(self.max_depenetration_velocity.is_finite() && self.max_depenetration_velocity >= 0.0) {
             return bad(
@@ -128,7 +132,7 @@ impl GpuSolver {
             // loops per slot for the warm-start match); each sweep and each warm start visits the pairs and
             // their patches (four rows per pass); the body loops run twice per substep.
             let (pairs, patches) = (pair_count as u64, contacts.cfg.max_patches as u64);
-            let per_sweep = pairs * (patches + 1) + 1;
+            let per_sweep = pairs * (patches * cfg.patch_iters as u64 + 1) + 1;
             let passes = pairs * (1 + patches * (1 + 4 + 4 * 5))
                 + 2 * model.body_count() as u64
                 + cfg.substeps as u64
@@ -154,7 +158,7 @@ impl GpuSolver {
             max_depenetration_velocity: cfg.max_depenetration_velocity,
             rest_offset: cfg.rest_offset,
             max_speed: cfg.max_speed,
-            _pad: 0,
+            patch_iters: cfg.patch_iters,
             gravity: model.gravity.extend(0.0).to_array(),
         };
         let bodies: Vec<BodyGpu> = (0..model.body_count())

@@ -19,7 +19,7 @@ struct SolverParams {
     max_depenetration_velocity: f32,
     rest_offset: f32,
     max_speed: f32,
-    _pad: u32,
+    patch_iters: u32,
     gravity: vec4<f32>,
 }
 
@@ -307,6 +307,13 @@ fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool, resample: bool) 
                 solve_row(world, g0 + ROW, h, bias, resample);
                 solve_row(world, g0 + 2u * ROW, h, bias, resample);
                 solve_row(world, g0 + 3u * ROW, h, bias, resample);
+                // Extra passes over this patch alone (SolverConfig::patch_iters), on the sampled geometry.
+                for (var inner = 1u; inner < sp.patch_iters; inner++) {
+                    solve_row(world, g0, h, bias, false);
+                    solve_row(world, g0 + ROW, h, bias, false);
+                    solve_row(world, g0 + 2u * ROW, h, bias, false);
+                    solve_row(world, g0 + 3u * ROW, h, bias, false);
+                }
             }
         }
     }
