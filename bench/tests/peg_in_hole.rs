@@ -5,10 +5,10 @@
 //!
 //! Scene: the hole block (25 x 25 mm, 8.99 mm tall, through bore 4.1 mm) is fixed on a table (the plane
 //! z = 0), so the bore's bottom is the table: a peg that goes all the way down rests on the table inside the
-//! bore. Pairs by Factory's rules (`contact::roles::pair_spec`): peg vs hole, both tagged meshes at
-//! resolution 256 with 1024 triangles each (a tie: the first, the peg, is the SDF; the hole's triangles are
-//! queried); peg vs table, the peg's triangles against the exact half-space. Solver at Factory's task settings
-//! (DESIGN 4.4: dt = 1/60 s, 2 substeps, 16 position iterations).
+//! bore. Pairs by Factory's rules (`contact::roles::pair_spec`): peg vs hole, the peg's exact round field
+//! (`ShapeGeometry::Revolved`, which takes the SDF role) against the hole's 1024 triangles; peg vs table, the
+//! peg's triangles against the exact half-space. Solver at Factory's task settings (DESIGN 4.4: dt = 1/60 s,
+//! 2 substeps, 16 position iterations) with 8 passes per patch (PATCH_ITERS).
 
 use factory_assets::{peg_hole, Fit, PegHole, PegHoleOptions, PegSize};
 use factory_engine::contact::roles::{pair_spec, ShapeDesc, ShapeGeometry};
@@ -64,6 +64,13 @@ fn parts() -> &'static PegHole {
     P.get_or_init(|| peg_hole(PegSize::D4, Fit::Tight, &PegHoleOptions::default()).unwrap())
 }
 
+/// The peg as an exact solid of revolution (its mesh is queried against the table; its exact field is the
+/// SDF against the hole, where a grid baked from its 128-sided mesh would spin it: engine sdf::revolved).
+fn exact_peg() -> ShapeGeometry {
+    let ph = parts();
+    ShapeGeometry::Revolved { mesh: Arc::new(ph.peg.mesh.clone()), sdf: ph.peg_sdf() }
+}
+
 fn scene() -> ContactModel {
     let ph = parts();
     let cache = SdfCache::new(SdfCache::default_dir());
@@ -72,7 +79,7 @@ fn scene() -> ContactModel {
         mesh: Arc::new(m.clone()),
         sdf_resolution: Some(res),
     };
-    let peg = ShapeDesc::new(0, tagged(&ph.peg.mesh));
+    let peg = ShapeDesc::new(0, exact_peg());
     let hole = ShapeDesc::fixed((Vec3::ZERO, Quat::IDENTITY), tagged(&ph.hole.mesh));
     let table = ShapeDesc::fixed((Vec3::ZERO, Quat::IDENTITY), ShapeGeometry::Plane);
     let mut a = pair_spec(&peg, &hole, HOLE_OFFSET, &cache).unwrap();
@@ -137,9 +144,8 @@ fn run_in(
 /// GPU solver and the CPU reference; at 8 passes per patch it stands (max tilt 0.11 deg).
 #[test]
 fn a_peg_standing_on_the_table_stays_upright() {
-    let ph = parts();
     let cache = SdfCache::new(SdfCache::default_dir());
-    let peg = ShapeDesc::new(0, ShapeGeometry::Revolved { mesh: Arc::new(ph.peg.mesh.clone()), sdf: ph.peg_sdf() });
+    let peg = ShapeDesc::new(0, exact_peg());
     let table = ShapeDesc::fixed((Vec3::ZERO, Quat::IDENTITY), ShapeGeometry::Plane);
     let mut pair = pair_spec(&peg, &table, TABLE_OFFSET, &cache).unwrap();
     pair.friction = FRICTION;

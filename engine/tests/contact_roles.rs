@@ -191,3 +191,37 @@ fn untagged_boxes_collide_convex_convex() {
     }
     std::fs::remove_dir_all(dir).ok();
 }
+
+/// An exact solid of revolution takes the SDF role against a tagged mesh with more triangles (an exact field
+/// beats a grid) and runs on the GPU and its CPU twin alike (sdf kind 3): a box resting across a round peg's
+/// top face touches it along the face (depth -overlap, normal +z, exact up to f32 rounding).
+#[test]
+fn an_exact_solid_of_revolution_is_the_sdf_and_its_contacts_are_exact() {
+    let (c, dir) = cache("revolved");
+    let profile = factory_engine::sdf::revolved::RevolvedSdf::chamfered_cylinder(0.01, 0.03, 0.001).unwrap();
+    // Its mesh (queried when it is not the SDF) is a stand-in here: 12 triangles.
+    let peg = ShapeDesc::new(0, ShapeGeometry::Revolved { mesh: Arc::new(box_mesh(Vec3::splat(0.01))), sdf: profile });
+    let tagged = |h: Vec3| ShapeGeometry::Mesh {
+        mesh: Arc::new(box_mesh(h).split_long_triangles(0.01)),
+        sdf_resolution: Some(64),
+    };
+    let lid_h = Vec3::new(0.004, 0.004, 0.002);
+    let lid = ShapeDesc::new(1, tagged(lid_h));
+    let pair = pair_spec(&lid, &peg, 2e-3, &c).unwrap();
+    assert!(matches!(pair.sdf, SdfShape::Revolved(_)), "the exact field is the SDF: {:?}", pair.sdf);
+    assert!(pair.query.triangles.len() > 12, "the tagged mesh is queried");
+    let overlap = 0.2e-3;
+    let poses = [
+        TransformGpu::new(Vec3::ZERO, Quat::IDENTITY),
+        TransformGpu::new(Vec3::new(0.001, -0.002, 0.03 + lid_h.z - overlap), Quat::IDENTITY),
+    ];
+    for (name, out) in ["gpu", "cpu"].iter().zip(run(pair, &poses)) {
+        let contacts: Vec<_> = out.patches[0].iter().flat_map(|p| p.contacts.iter()).collect();
+        assert!(contacts.len() >= 3, "{name}: {} contacts", contacts.len());
+        for ct in contacts {
+            assert!((ct.depth + overlap).abs() < 1e-6, "{name}: depth {}", ct.depth);
+            assert!(ct.normal.dot(Vec3::Z) > 0.99999, "{name}: normal {}", ct.normal);
+        }
+    }
+    std::fs::remove_dir_all(dir).ok();
+}
