@@ -155,15 +155,14 @@ fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wi
                 }
             }
         }
-        cand_pd[lid] = cand;
-        cand_n[lid] = normal;
+        put_candidate(lid, cand, normal);
         pc = reduce_batch(lid, pc, params.normal_cos, offset, pair.min_separation);
     }
     if (found > 0u) {
         atomicAdd(&pair_candidates[world * params.pair_count + job.pair], found);
     }
-    // Write this job's patches in world coordinates (reduce_batch ended with a barrier after its last
-    // patch write).
+    workgroupBarrier(); // the last batch's slot writes
+    // Write this job's patches in world coordinates.
     let out_base = (world * params.job_count + job_index) * MAX_PATCHES;
     for (var p = lid; p < pc; p += WG) {
         var o: PatchOut;
