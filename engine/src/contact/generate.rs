@@ -210,7 +210,8 @@ pub fn minimise_on_triangle_cpu(
 
 /// The candidate of one query triangle given in the SDF shape's frame (or EMPTY), as in `generate`.
 pub fn triangle_candidate_cpu(pair: &PairGpu, sdf: &[u32], a: Vec3, b: Vec3, c: Vec3, iterations: u32) -> Candidate {
-    let centroid = (a + b + c) / 3.0;
+    // As the descent's barycentric start, which reuses this sample (same rounding).
+    let centroid = a + (1.0f32 / 3.0) * (b - a) + (1.0f32 / 3.0) * (c - a);
     let reach = (a - centroid)
         .dot(a - centroid)
         .max((b - centroid).dot(b - centroid).max((c - centroid).dot(c - centroid)))

@@ -138,7 +138,8 @@ fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wi
             let c = xf_point(b_from_a, tri_verts[v + 2u].xyz);
             // Cull: the SDF at the centroid bounds the distance of the whole triangle (1-Lipschitz,
             // plus one voxel for interpolation error).
-            let centroid = (a + b + c) / 3.0;
+            // (Written as the descent's barycentric start, which reuses this sample: same rounding.)
+            let centroid = a + (1.0 / 3.0) * (b - a) + (1.0 / 3.0) * (c - a);
             let reach = sqrt(max(dot(a - centroid, a - centroid), max(dot(b - centroid, b - centroid), dot(c - centroid, c - centroid))));
             let sc = sdf_sample(pair, centroid);
             let slack = select(pair.sdf_origin.w, 0.0, pair.sdf_kind == 1u);
