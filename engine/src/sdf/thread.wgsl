@@ -120,8 +120,7 @@ fn thread_sample(base: u32, p: vec3<f32>) -> Sample {
     }
     // The head's field is at least its slab's (|z - zc| - half height; hex_prism_sample never returns
     // less, up to rounding: hence the 1 um margin), so beside the thread it cannot win: skip its two
-    // segment projections and square roots (most samples of a nut on the thread are far above the head;
-    // M16 nut on the bolt, 64 worlds on lavapipe: 3-5% less contact handling time).
+    // segment projections and square roots (most samples of a nut on the thread are far above the head).
     let head_z0 = tw(base, 9u);
     let head_z1 = tw(base, 10u);
     let head_slab = abs(p.z - 0.5 * (head_z0 + head_z1)) - 0.5 * (head_z1 - head_z0);
