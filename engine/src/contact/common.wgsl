@@ -106,25 +106,39 @@ fn ordered(f: f32) -> u32 {
     return (b ^ m) & ~IDX_MASK;
 }
 
-var<workgroup> cand_pd: array<vec4<f32>, WG>;      // point xyz, depth w (EMPTY: no candidate)
-var<workgroup> cand_n: array<vec4<f32>, WG>;       // unit normal xyz, area units w
+// The batch. Points are double-buffered by batch parity (put_candidate), so a batch's last reads of them
+// (the slot rounds) and the next batch's writes need no barrier between them; normals are last read by
+// AddPatch, before the barriers of the batch's last round.
+var<workgroup> cand_pd: array<vec4<f32>, 2u * WG>;      // point xyz, depth w (EMPTY: no candidate)
+var<workgroup> cand_n: array<vec4<f32>, WG>;            // unit normal xyz, area units w
 var<workgroup> patch_n: array<vec4<f32>, PATCH_CAP>;        // seed normal xyz
 var<workgroup> patch_area: array<atomic<u32>, PATCH_CAP>;   // member area [area units]
 var<workgroup> patch_slot: array<vec4<f32>, PATCH_CAP * 4u>;          // 4 per patch: point xyz, depth w
-var<workgroup> patch_key: array<atomic<u32>, PATCH_CAP>;
+var<workgroup> patch_key: array<atomic<u32>, PATCH_CAP>;   // slot rounds 1-3
+var<workgroup> patch_key0: array<atomic<u32>, PATCH_CAP>;  // slot 0 (deepest): members post during Assign/AddPatch
 var<workgroup> wg_best: array<atomic<u32>, 2>;  // FindDeepest keys, double-buffered by loop parity
 var<workgroup> wg_victim: atomic<u32>; // eviction arg-min key, NONE between evictions
-var<workgroup> patch_count: u32;
+// Per invocation (workgroup-uniform): batches reduced so far (the candidate buffer's parity) and FindDeepest
+// rounds so far (wg_best's parity runs on across batches, so a batch's last round leaves the buffer of the
+// next batch's first round zeroed).
+var<private> red_batch: u32;
+var<private> red_round: u32;
+
+// Stores this invocation's candidate of the next batch (EMPTY depth: none).
+fn put_candidate(lid: u32, pd: vec4<f32>, n: vec4<f32>) {
+    cand_pd[(red_batch & 1u) * WG + lid] = pd;
+    cand_n[lid] = n;
+}
 
 fn reset_patches(lid: u32) {
     for (var p = lid; p < PATCH_CAP; p += WG) {
         atomicStore(&patch_area[p], 0u);
+        atomicStore(&patch_key0[p], 0u);
         for (var s = 0u; s < 4u; s++) {
             patch_slot[p * 4u + s] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
         }
     }
     if (lid == 0u) {
-        patch_count = 0u;
         atomicStore(&wg_best[0], 0u);
         atomicStore(&wg_best[1], 0u);
         atomicStore(&wg_victim, NONE);
@@ -189,26 +203,35 @@ fn assign_step(p: u32, pc0: u32, n: vec3<f32>, best: ptr<function, f32>, mine: p
 // workgroup that the batch has members and needs the slot rounds.
 const ASSIGNED_ONLY: u32 = 0x200u;
 
-// Reduces the batch in cand_* into the workgroup's patch list; `pc0` is the patch count before the batch
-// (workgroup-uniform; the caller keeps it) and the count after it is returned. Every invocation must call
-// it, after writing its cand_pd / cand_n slot.
+// Reduces the batch stored by put_candidate into the workgroup's patch list; `pc0` is the patch count
+// before the batch (workgroup-uniform; the caller keeps it) and the count after it is returned. Every
+// invocation must call it, after put_candidate. The caller must barrier before reading the patch list.
 //
 // Barriers cost on lavapipe (it runs a workgroup as WG/8 8-wide coroutines, resumed once per barrier
-// region) and they serialise warps on a GPU, so each step is placed to need as few as possible:
+// region) and they serialise warps on a GPU, so each step is placed to need as few as possible (a batch
+// that opens no patch costs 8, it cost 12 before):
+// - no barrier at entry: Assign reads only this invocation's candidate and the patch normals, which the
+//   previous batch last wrote before a barrier; candidates of other invocations are read only after the
+//   first round's workgroupUniformLoad; the points are double-buffered, so none at exit either;
 // - the seed's normal is read from cand_n (stable during the batch), so binning needs no barrier after
-//   AddPatch writes the patch; a fresh patch index's area is still 0 from reset_patches (the temporary
-//   patch MAX_PATCHES is zeroed after each use), so members can add to it at once;
+//   AddPatch writes the patch; a fresh patch index's area and slot-0 key are still 0 from reset_patches
+//   (the temporary patch MAX_PATCHES is zeroed after each use), so members can add to them at once;
+// - slot 0 (the deepest member) is an arg-max whose keys members post as soon as they know their patch
+//   (Assign, AddPatch), into patch_key0, so it needs no round of its own; the slot's current contact
+//   enters the arg-max when the key is read (max is order-free);
 // - wg_best is double-buffered: the buffer of round i+1 is zeroed during round i, before the barrier that
 //   ends every read of it from round i-1, so a round costs one workgroupUniformLoad (2 barriers), plus 3
 //   when the budget is full and a victim must be chosen (one atomic arg-min over the patches);
-// - each slot round initialises the next round's keys in the region that writes its slots (2 barriers
-//   per round), and a batch whose invocations have no candidate skips the slot rounds.
+// - each of slot rounds 1-3 initialises the next round's keys in the region that writes its slots (2
+//   barriers per round), and a batch whose invocations have no candidate skips the slot rounds.
 fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) -> u32 {
-    workgroupBarrier(); // cand_* written
+    let cb = (red_batch & 1u) * WG;
+    red_batch += 1u;
     // Assign: the most similar existing patch above the threshold.
-    let my = cand_pd[lid];
+    let my = cand_pd[cb + lid];
     let my_n = cand_n[lid];
     let units = u32(my_n.w);
+    let my_key0 = ordered(-my.w) | (lid + 1u);
     var mine = NONE;
     if (my.w < VALID_BELOW) {
         var best = normal_cos;
@@ -221,6 +244,7 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
         }
         if (mine != UNASSIGNED) {
             atomicAdd(&patch_area[mine], units);
+            atomicMax(&patch_key0[mine], my_key0);
         }
     }
     // New patches: FindDeepest, BinReduce, AddPatch until every candidate is binned. `mine` is this
@@ -228,9 +252,10 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
     var pc = pc0;
     var any_member = false;
     for (var round = 0u; ; round++) {
-        let b = round & 1u;
+        let b = red_round & 1u;
+        red_round += 1u;
         if (mine == UNASSIGNED) {
-            atomicMax(&wg_best[b], ordered(-my.w) | (lid + 1u));
+            atomicMax(&wg_best[b], my_key0);
         } else if (round == 0u && mine != NONE) {
             atomicMax(&wg_best[b], ASSIGNED_ONLY);
         }
@@ -242,9 +267,6 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
             any_member = best != 0u;
         }
         if (best <= IDX_MASK) {
-            if (lid == 0u) {
-                atomicStore(&wg_best[b], 0u);
-            }
             break;
         }
         let seed = (best & IDX_MASK) - 1u;
@@ -252,7 +274,7 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
         let idx = min(pc, MAX_PATCHES);
         if (lid == 0u) {
             patch_n[idx] = vec4<f32>(seed_n, 0.0);
-            patch_slot[idx * 4u] = cand_pd[seed];
+            patch_slot[idx * 4u] = cand_pd[cb + seed];
             patch_slot[idx * 4u + 1u] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
             patch_slot[idx * 4u + 2u] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
             patch_slot[idx * 4u + 3u] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
@@ -260,6 +282,7 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
         if (mine == UNASSIGNED && dot(my_n.xyz, seed_n) >= normal_cos) {
             mine = idx;
             atomicAdd(&patch_area[idx], units);
+            atomicMax(&patch_key0[idx], my_key0);
         }
         if (idx < MAX_PATCHES) {
             pc = idx + 1u;
@@ -275,16 +298,19 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
             let code = workgroupUniformLoad(&wg_victim) & IDX_MASK;
             let victim = select(NONE, code - 1u, code != 0u);
             // Lane 0 moves the patch; the next reads of the patch list follow the next round's barrier.
+            // The victim's own members' slot-0 keys go with it (they are no longer members).
             if (lid == 0u) {
                 if (victim != NONE) {
                     patch_n[victim] = patch_n[MAX_PATCHES];
                     atomicStore(&patch_area[victim], atomicLoad(&patch_area[MAX_PATCHES]));
+                    atomicStore(&patch_key0[victim], atomicLoad(&patch_key0[MAX_PATCHES]));
                     patch_slot[victim * 4u] = patch_slot[MAX_PATCHES * 4u];
                     patch_slot[victim * 4u + 1u] = patch_slot[MAX_PATCHES * 4u + 1u];
                     patch_slot[victim * 4u + 2u] = patch_slot[MAX_PATCHES * 4u + 2u];
                     patch_slot[victim * 4u + 3u] = patch_slot[MAX_PATCHES * 4u + 3u];
                 }
                 atomicStore(&patch_area[MAX_PATCHES], 0u);
+                atomicStore(&patch_key0[MAX_PATCHES], 0u);
                 atomicStore(&wg_victim, NONE);
             }
             if (mine == MAX_PATCHES) {
@@ -294,19 +320,23 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
             }
         }
     }
-    if (lid == 0u) {
-        patch_count = pc;
-    }
     if (!any_member) {
         return pc; // no candidate in the batch: the slot rounds would change nothing
     }
-    // Slots: 4 rounds, each an atomic arg-max per patch over the current slot and this batch's members.
+    // Slots: the arg-max per patch over the current slot and this batch's members, slot by slot (each
+    // slot's metric depends on the slots before it). The patches written above and every slot-0 post are
+    // visible: the last workgroupUniformLoad of the loop was a barrier.
     let band = DEPTH_BAND * offset;
-    // The patches written above are visible: the last workgroupUniformLoad of the loop was a barrier.
     for (var p = lid; p < pc; p += WG) {
-        atomicStore(&patch_key[p], slot_key(0u, p, min_sep, band));
+        let key = max(atomicLoad(&patch_key0[p]), slot_key(0u, p, min_sep, band));
+        atomicStore(&patch_key0[p], 0u); // for the next batch's posts, which follow this batch's barriers
+        let code = key & IDX_MASK;
+        if (code != 0u) {
+            patch_slot[p * 4u] = cand_pd[cb + code - 1u];
+        }
+        atomicStore(&patch_key[p], slot_key(1u, p, min_sep, band));
     }
-    for (var k = 0u; k < 4u; k++) {
+    for (var k = 1u; k < 4u; k++) {
         workgroupBarrier();
         if (mine < MAX_PATCHES) {
             let m = slot_metric(k, mine, my.xyz, my.w, min_sep, band);
@@ -319,8 +349,8 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
             let key = atomicLoad(&patch_key[p]);
             let code = key & IDX_MASK;
             if (code != 0u) {
-                patch_slot[p * 4u + k] = cand_pd[code - 1u];
-            } else if (key == 0u && k > 0u) {
+                patch_slot[p * 4u + k] = cand_pd[cb + code - 1u];
+            } else if (key == 0u) {
                 // Neither the current contact (no longer eligible: too close to or far above the new
                 // deepest) nor a candidate qualifies: the slot empties.
                 patch_slot[p * 4u + k] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
@@ -330,7 +360,6 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
             }
         }
     }
-    workgroupBarrier(); // slots read cand_pd: the caller may overwrite it after this
     return pc;
 }
 

@@ -158,21 +158,22 @@ pub fn sdf_sample_cpu(pair: &PairGpu, sdf_values: &[u32], p: Vec3) -> (f32, Vec3
     })
 }
 
-/// Point of least signed distance on triangle (a, b, c) and the sample there (`minimise_on_triangle`).
+/// Point of least signed distance on triangle (a, b, c) and the sample there (`minimise_on_triangle`),
+/// starting from `start`: the centroid and its sample.
 pub fn minimise_on_triangle_cpu(
     pair: &PairGpu,
     sdf: &[u32],
     a: Vec3,
     b: Vec3,
     c: Vec3,
+    start: (Vec3, (f32, Vec3)),
     iterations: u32,
 ) -> (Vec3, (f32, Vec3)) {
     let (e1, e2) = (b - a, c - a);
     let (g11, g12, g22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
     let det = g11 * g22 - g12 * g12;
     let mut uv = glam::Vec2::splat(1.0 / 3.0);
-    let mut x = a + uv.x * e1 + uv.y * e2;
-    let mut s = sdf_sample_cpu(pair, sdf, x);
+    let (mut x, mut s) = start;
     for corner in [glam::Vec2::ZERO, glam::Vec2::X, glam::Vec2::Y] {
         let xi = a + corner.x * e1 + corner.y * e2;
         let si = sdf_sample_cpu(pair, sdf, xi);
@@ -220,7 +221,8 @@ pub fn minimise_on_triangle_cpu(
 
 /// The candidate of one query triangle given in the SDF shape's frame (or EMPTY), as in `generate`.
 pub fn triangle_candidate_cpu(pair: &PairGpu, sdf: &[u32], a: Vec3, b: Vec3, c: Vec3, iterations: u32) -> Candidate {
-    let centroid = (a + b + c) / 3.0;
+    // As the descent's barycentric start, which reuses this sample (same rounding).
+    let centroid = a + (1.0f32 / 3.0) * (b - a) + (1.0f32 / 3.0) * (c - a);
     let reach = (a - centroid)
         .dot(a - centroid)
         .max((b - centroid).dot(b - centroid).max((c - centroid).dot(c - centroid)))
@@ -230,7 +232,7 @@ pub fn triangle_candidate_cpu(pair: &PairGpu, sdf: &[u32], a: Vec3, b: Vec3, c: 
     if sc.0 - reach - pair.radius - slack > pair.contact_offset {
         return Candidate::EMPTY;
     }
-    let (x, (d, g)) = minimise_on_triangle_cpu(pair, sdf, a, b, c, iterations);
+    let (x, (d, g)) = minimise_on_triangle_cpu(pair, sdf, a, b, c, (centroid, sc), iterations);
     let depth = d - pair.radius;
     let glen = g.length();
     if !(depth < pair.contact_offset && glen > 0.0) {

@@ -62,10 +62,10 @@ fn merge(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: 
                 normal = vec4<f32>(p.normal.xyz, f32(max(1u, u32(round(units)))));
             }
         }
-        cand_pd[lid] = cand;
-        cand_n[lid] = normal;
+        put_candidate(lid, cand, normal);
         pc = reduce_batch(lid, pc, params.normal_cos, pair.contact_offset, pair.min_separation);
     }
+    workgroupBarrier(); // the last batch's slot writes
     let out_base = (world * params.pair_count + pair_index) * MAX_PATCHES;
     for (var p = lid; p < pc; p += WG) {
         var o: PatchOut;

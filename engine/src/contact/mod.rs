@@ -80,11 +80,11 @@ impl ContactConfig {
 
     /// Worst-case loop back edges of one `reduce_batch` (common.wgsl) per invocation: Assign (unrolled by
     /// 4), at most one new-patch round per candidate plus the last, each with the eviction's strided
-    /// arg-min, the slot keys' init and 4 slot rounds with their strided writes.
+    /// arg-min, slot 0's strided write and the loop of slot rounds 1-3 with their strided writes.
     fn reduce_batch_loops(&self) -> u32 {
         let assign = self.max_patches.div_ceil(4) + 1;
         let rounds = (self.workgroup_size + 1) * (1 + self.strided(self.max_patches + 1));
-        let slots = self.strided(self.max_patches) + 5 + 4 * self.strided(self.max_patches);
+        let slots = self.strided(self.max_patches) + 4 + 3 * self.strided(self.max_patches);
         assign + rounds + slots
     }
 
@@ -187,13 +187,13 @@ impl ContactConfig {
         Ok(())
     }
 
-    /// Bytes of workgroup memory the generate and merge kernels declare (common.wgsl): the batch
-    /// (`cand_pd`, `cand_n`: 2 x 16 bytes per invocation), the patch list (`patch_n` 16, `patch_area` 4,
-    /// `patch_slot` 4 x 16, `patch_key` 4 bytes per patch, budget + 1 patches) and `wg_best`, `wg_u32`,
-    /// `patch_count` (16 bytes).
+    /// Bytes of workgroup memory the generate and merge kernels declare (common.wgsl): the batch (`cand_pd`
+    /// double-buffered, `cand_n`: 3 x 16 bytes per invocation), the patch list (`patch_n` 16,
+    /// `patch_area` 4, `patch_slot` 4 x 16, `patch_key` and `patch_key0` 4 each per patch, budget + 1
+    /// patches) and `wg_best`, `wg_victim` (12 bytes).
     pub fn workgroup_bytes(&self) -> u32 {
         let cap = self.max_patches + 1;
-        self.workgroup_size * 16 * 2 + cap * (16 + 4 + 4 * 16 + 4) + 16
+        self.workgroup_size * 16 * 3 + cap * (16 + 4 + 4 * 16 + 4 + 4) + 12
     }
 }
 

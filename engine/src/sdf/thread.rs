@@ -53,6 +53,8 @@ pub struct ThreadSdf {
 pub const THREAD_WORDS: usize = 12;
 
 const SQRT3: f32 = 1.732_050_8;
+/// [m]: see [`ThreadSdf::sample`] (as `HEAD_SKIP_MARGIN` in thread.wgsl).
+const HEAD_SKIP_MARGIN: f32 = 1e-6;
 
 /// Closest point to `x` on segment (a, b) and whether it lies strictly inside the segment.
 pub(crate) fn seg_closest(x: Vec2, a: Vec2, b: Vec2) -> (Vec2, bool) {
@@ -131,7 +133,12 @@ impl ThreadSdf {
         if above > d {
             (d, g) = (above, Vec3::Z);
         }
-        if let Some(h) = self.head {
+        // The head's field is at least its slab's (hex_prism never returns less, up to rounding: hence the
+        // margin), so beside the thread it cannot win and is skipped (most samples of a nut on the thread
+        // lie far above the head).
+        if let Some(h) =
+            self.head.filter(|h| (p.z - 0.5 * (h.z0 + h.z1)).abs() - 0.5 * (h.z1 - h.z0) < d + HEAD_SKIP_MARGIN)
+        {
             let (dh, gh) = hex_prism(h, p);
             if dh < d {
                 (d, g) = (dh, gh);

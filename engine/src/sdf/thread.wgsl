@@ -2,6 +2,8 @@
 // method. Parameters are 12 f32 words in `sdf_values` starting at `base` (ThreadSdf::to_words).
 
 const SQRT3_T: f32 = 1.7320508;
+// [m], see thread_sample.
+const HEAD_SKIP_MARGIN: f32 = 1.0e-6;
 
 fn tw(base: u32, i: u32) -> f32 {
     return bitcast<f32>(sdf_values[base + i]);
@@ -116,8 +118,14 @@ fn thread_sample(base: u32, p: vec3<f32>) -> Sample {
         d = above;
         g = vec3<f32>(0.0, 0.0, 1.0);
     }
-    if (tw(base, 7u) != 0.0) {
-        let h = hex_prism_sample(tw(base, 8u), tw(base, 9u), tw(base, 10u), p);
+    // The head's field is at least its slab's (|z - zc| - half height; hex_prism_sample never returns
+    // less, up to rounding: hence the 1 um margin), so beside the thread it cannot win: skip its two
+    // segment projections and square roots (most samples of a nut on the thread are far above the head).
+    let head_z0 = tw(base, 9u);
+    let head_z1 = tw(base, 10u);
+    let head_slab = abs(p.z - 0.5 * (head_z0 + head_z1)) - 0.5 * (head_z1 - head_z0);
+    if (tw(base, 7u) != 0.0 && head_slab < d + HEAD_SKIP_MARGIN) {
+        let h = hex_prism_sample(tw(base, 8u), head_z0, head_z1, p);
         if (h.d < d) {
             d = h.d;
             g = h.g;
