@@ -75,6 +75,12 @@ enum Cmd {
         /// Friction coefficient (the paper's scene: 0.05).
         #[arg(long, default_value_t = 0.05)]
         mu: f32,
+        /// Projected-gradient iterations per query triangle.
+        #[arg(long, default_value_t = 12)]
+        descent_iters: u32,
+        /// Thread columns per turn of the generated nut and bolt meshes (multiple of 12, >= 24).
+        #[arg(long, default_value_t = 192)]
+        segments_per_turn: usize,
         /// ISO size (M4, M8, M12, M16, M20).
         #[arg(long, default_value = "M16")]
         size: String,
@@ -217,6 +223,8 @@ fn main() -> Result<()> {
             sdf_res,
             patches,
             mu,
+            descent_iters,
+            segments_per_turn,
             size,
             fit,
             json,
@@ -233,7 +241,7 @@ fn main() -> Result<()> {
                 worlds,
                 seconds,
                 sdf_resolution,
-                contact: ContactConfig { max_patches: patches, ..Default::default() },
+                contact: ContactConfig { max_patches: patches, iterations: descent_iters, ..Default::default() },
                 solver: factory_engine::solver::SolverConfig {
                     dt,
                     substeps,
@@ -244,6 +252,7 @@ fn main() -> Result<()> {
                 },
                 mu,
                 contact_offset: 1e-3,
+                segments_per_turn,
             };
             if !(mu.is_finite() && mu >= 0.0) {
                 bail!("--mu {mu}: the friction coefficient must be finite and >= 0");

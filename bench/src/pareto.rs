@@ -20,7 +20,7 @@
 
 use crate::scene::{run_nut_bolt, NutBoltReport, NutBoltRun};
 use anyhow::{ensure, Result};
-use factory_assets::{Fit, IsoSize};
+use factory_assets::{Fit, IsoSize, ThreadOptions};
 use factory_engine::contact::ContactConfig;
 use factory_engine::gpu::GpuContext;
 use factory_engine::solver::SolverConfig;
@@ -603,6 +603,7 @@ pub fn run_point(gpu: &GpuContext, a: &ParetoArgs, s: Setting) -> PointResult {
         },
         mu: 0.0,
         contact_offset: 1e-3,
+        segments_per_turn: ThreadOptions::default().segments_per_turn,
     };
     match run_nut_bolt(gpu, &run) {
         Ok(r) => {
@@ -833,6 +834,9 @@ mod tests {
             patch_iters: 1,
             sdf: "analytic".into(),
             max_patches: patches,
+            descent_iters: 12,
+            segments_per_turn: 192,
+            query_triangles: 11512,
             mu: 0.0,
             wall_s,
             ms_per_frame: wall_s * 1e3 / 60.0,

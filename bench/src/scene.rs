@@ -29,6 +29,8 @@ pub struct NutBoltRun {
     pub mu: f32,
     /// Contact offset [m].
     pub contact_offset: f32,
+    /// Thread columns per turn of the generated nut and bolt meshes (the nut's triangles are queried).
+    pub segments_per_turn: usize,
 }
 
 /// What the run measured.
@@ -47,6 +49,11 @@ pub struct NutBoltReport {
     pub patch_iters: u32,
     pub sdf: String,
     pub max_patches: u32,
+    /// Projected-gradient iterations per query triangle.
+    pub descent_iters: u32,
+    pub segments_per_turn: usize,
+    /// Query (nut) triangles per pair.
+    pub query_triangles: usize,
     pub mu: f32,
     /// Wall time of the frames (submission to completion; readbacks for the figures excluded) [s].
     pub wall_s: f64,
@@ -79,7 +86,8 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
     ensure!(run.worlds > 0, "--worlds must be at least 1");
     ensure!(run.seconds > 0.0 && run.seconds.is_finite(), "--seconds must be > 0, got {}", run.seconds);
     run.solver.validate()?;
-    let nb = nut_bolt(run.size, run.fit, &ThreadOptions::default())?;
+    let nb =
+        nut_bolt(run.size, run.fit, &ThreadOptions { segments_per_turn: run.segments_per_turn, ..Default::default() })?;
     let pair = PartPair::nut_bolt(&nb);
     let mut scene = match run.sdf_resolution {
         None => ContactScene::with_thread_sdf(pair, nb.bolt_sdf(), run.contact_offset),
@@ -149,6 +157,9 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         patch_iters: run.solver.patch_iters,
         sdf: run.sdf_resolution.map_or("analytic".into(), |r| format!("grid {r}")),
         max_patches: run.contact.max_patches,
+        descent_iters: run.contact.iterations,
+        segments_per_turn: run.segments_per_turn,
+        query_triangles: nb.nut.mesh.triangle_count(),
         mu: run.mu,
         wall_s: wall,
         ms_per_frame: wall * 1e3 / frames as f64,

@@ -15,16 +15,33 @@ pub(crate) const GENERATE_WGSL: &str = concat!(
 
 /// The WGSL module of a kernel with the patch budget substituted and the default workgroup size (for
 /// kernels that do not reduce: normals, solver).
-pub fn shader_source(kernel_wgsl: &str, max_patches: u32) -> String {
-    shader_source_wg(kernel_wgsl, max_patches, ContactConfig::default().workgroup_size)
+pub fn shader_source(kernel_wgsl: &str, max_patches: u32, kinds: SdfKinds) -> String {
+    shader_source_wg(kernel_wgsl, max_patches, ContactConfig::default().workgroup_size, kinds)
+}
+
+/// Which optional SDF kinds a pipeline's model uses. Each kind's branch in `sdf_sample` (sdf_sample.wgsl)
+/// is compiled in only when used: lavapipe inlines every call, and the revolved field's 15 written-out
+/// segments inlined at the generate kernel's ~6 sample sites doubled its run time on the nut-bolt pair
+/// even though no pair took that branch (measured 2026-11-22: 1300 vs 640 ms per frame at 64 worlds).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SdfKinds {
+    /// Some pair's SDF is a solid of revolution (kind 3).
+    pub revolved: bool,
+}
+
+impl SdfKinds {
+    /// The kinds the pairs of a flattened model use.
+    pub fn of(pairs: &[crate::contact::model::PairGpu]) -> Self {
+        SdfKinds { revolved: pairs.iter().any(|p| p.sdf_kind == 3) }
+    }
 }
 
 /// The WGSL module of a kernel with the patch budget and the reduction's workgroup size substituted.
-pub fn shader_source_wg(kernel_wgsl: &str, max_patches: u32, workgroup_size: u32) -> String {
+pub fn shader_source_wg(kernel_wgsl: &str, max_patches: u32, workgroup_size: u32, kinds: SdfKinds) -> String {
     let common = COMMON_WGSL
         .replace("MAX_PATCHES_VALUE", &format!("{max_patches}u"))
         .replace("WG_VALUE", &format!("{workgroup_size}u"));
-    format!("{common}\n{kernel_wgsl}")
+    format!("{common}\n{kernel_wgsl}").replace("HAS_REVOLVED_VALUE", if kinds.revolved { "true" } else { "false" })
 }
 
 /// Builds a compute pipeline from WGSL with an automatic layout.
@@ -64,12 +81,12 @@ pub struct GenerateKernel {
 }
 
 impl GenerateKernel {
-    pub fn new(device: &wgpu::Device, cfg: &ContactConfig) -> Self {
+    pub fn new(device: &wgpu::Device, cfg: &ContactConfig, kinds: SdfKinds) -> Self {
         GenerateKernel {
             pipeline: compute_pipeline(
                 device,
                 "contact-generate",
-                &shader_source_wg(GENERATE_WGSL, cfg.max_patches, cfg.workgroup_size),
+                &shader_source_wg(GENERATE_WGSL, cfg.max_patches, cfg.workgroup_size, kinds),
                 "generate",
             ),
         }

@@ -19,7 +19,7 @@ impl MergeKernel {
             pipeline: compute_pipeline(
                 device,
                 "contact-merge",
-                &shader_source_wg(MERGE_WGSL, cfg.max_patches, cfg.workgroup_size),
+                &shader_source_wg(MERGE_WGSL, cfg.max_patches, cfg.workgroup_size, Default::default()),
                 "merge",
             ),
         }
@@ -75,7 +75,7 @@ mod tests {
         for wg in [32, 64, 128, 256] {
             for max_patches in [16, 64, 256] {
                 for (name, wgsl) in [("generate", GENERATE_WGSL), ("merge", MERGE_WGSL)] {
-                    let src = shader_source_wg(wgsl, max_patches, wg);
+                    let src = shader_source_wg(wgsl, max_patches, wg, Default::default());
                     let module = naga::front::wgsl::parse_str(&src)
                         .unwrap_or_else(|e| panic!("{name} wg {wg}: {}", e.emit_to_string(&src)));
                     naga::valid::Validator::new(

@@ -21,12 +21,12 @@ pub struct NormalsKernel {
 }
 
 impl NormalsKernel {
-    pub fn new(device: &wgpu::Device, cfg: &ContactConfig) -> Self {
+    pub fn new(device: &wgpu::Device, cfg: &ContactConfig, kinds: super::generate::SdfKinds) -> Self {
         NormalsKernel {
             pipeline: compute_pipeline(
                 device,
                 "contact-normals",
-                &shader_source(NORMALS_WGSL, cfg.max_patches),
+                &shader_source(NORMALS_WGSL, cfg.max_patches, kinds),
                 "normals",
             ),
         }

@@ -190,9 +190,10 @@ impl ContactPipeline {
             world_count as u64 * pair_count as u64 * cfg.max_patches as u64 * patch_bytes,
         );
         let patch_counts = gpu.storage_buffer_zeroed("patch_counts", 4 * (world_count * pair_count) as u64);
-        let generate = GenerateKernel::new(dev, cfg);
+        let kinds = super::generate::SdfKinds::of(&flat.pairs);
+        let generate = GenerateKernel::new(dev, cfg, kinds);
         let merge = MergeKernel::new(dev, cfg);
-        let normals = NormalsKernel::new(dev, cfg);
+        let normals = NormalsKernel::new(dev, cfg, kinds);
         let contact_normals = gpu.storage_buffer_zeroed(
             "contact_normals",
             world_count as u64 * pair_count as u64 * cfg.max_patches as u64 * 4 * 16,

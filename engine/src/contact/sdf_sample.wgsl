@@ -2,6 +2,10 @@
 // concatenates it after the kernel, which must bind `sdf_values: array<u32>` (16-bit grid values packed in
 // pairs, or analytic parameters; see model.rs).
 
+// Whether the model has a kind-3 pair (substituted by the host, generate.rs SdfKinds): lavapipe inlines every
+// call, so an unused branch to the revolved field would still be compiled in at every sample site.
+const HAS_REVOLVED: bool = HAS_REVOLVED_VALUE;
+
 struct Sample {
     d: f32,
     g: vec3<f32>,
@@ -25,7 +29,7 @@ fn sdf_sample(pair: Pair, p: vec3<f32>) -> Sample {
     if (pair.sdf_kind == 2u) {
         return thread_sample(pair.sdf_dims.w, p);
     }
-    if (pair.sdf_kind == 3u) {
+    if (HAS_REVOLVED && pair.sdf_kind == 3u) {
         return revolved_sample(pair.sdf_dims.w, p);
     }
     let lo = pair.sdf_origin.xyz;

@@ -22,9 +22,11 @@ fn contact_shaders_validate_with_naga() {
             ("normals", NORMALS_WGSL),
             ("solver", crate::solver::gpu::SOLVER_WGSL),
         ] {
-            let src = shader_source(wgsl, max_patches);
-            if let Err(e) = validate(&src) {
-                panic!("{name}.wgsl with max_patches = {max_patches}:\n{e}");
+            for revolved in [false, true] {
+                let src = shader_source(wgsl, max_patches, super::generate::SdfKinds { revolved });
+                if let Err(e) = validate(&src) {
+                    panic!("{name}.wgsl with max_patches = {max_patches}, revolved {revolved}:\n{e}");
+                }
             }
         }
     }

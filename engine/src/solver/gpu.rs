@@ -2,7 +2,7 @@
 //! [`super::step_cpu`]; `engine/tests/solver_gpu.rs` checks parity and bitwise determinism.
 
 use super::{BodyModel, BodyState, SolverConfig};
-use crate::contact::generate::{compute_pipeline, shader_source};
+use crate::contact::generate::{compute_pipeline, shader_source, SdfKinds};
 use crate::contact::ContactPipeline;
 use crate::error::{EngineError, Result};
 use crate::gpu::GpuContext;
@@ -198,8 +198,12 @@ impl GpuSolver {
             });
         }
         let scratch = gpu.storage_buffer_zeroed("solver_scratch", scratch_bytes);
-        let pipeline =
-            compute_pipeline(dev, "solver-step", &shader_source(SOLVER_WGSL, contacts.cfg.max_patches), "step");
+        let pipeline = compute_pipeline(
+            dev,
+            "solver-step",
+            &shader_source(SOLVER_WGSL, contacts.cfg.max_patches, SdfKinds::of(&contacts.flat.pairs)),
+            "step",
+        );
         let group = |index: u32, buffers: &[&wgpu::Buffer]| gpu.bind_group(&pipeline, index, buffers);
         let groups = [
             group(0, &[&uniform, &contacts.pairs, &contacts.sdf_values, &bodies_buf]),
