@@ -225,3 +225,51 @@ fn an_exact_solid_of_revolution_is_the_sdf_and_its_contacts_are_exact() {
     }
     std::fs::remove_dir_all(dir).ok();
 }
+
+/// Pairs whose SDF shape is the same tagged mesh share one baked grid (one `Arc`, uploaded once), as the
+/// nuts of a pile must; a different resolution is a different grid.
+#[test]
+fn pairs_built_from_one_tagged_mesh_share_its_sdf_grid() {
+    let (c, dir) = cache("shared");
+    let nut = Arc::new(box_mesh(Vec3::new(0.01, 0.01, 0.005)).split_long_triangles(0.004));
+    let tagged = |r: u32| ShapeGeometry::Mesh { mesh: nut.clone(), sdf_resolution: Some(r) };
+    let ball = ShapeGeometry::Sphere { radius: 0.002 };
+    let pairs: Vec<PairSpec> = (0..3)
+        .map(|i| pair_spec(&ShapeDesc::new(i, tagged(32)), &ShapeDesc::new(3, ball.clone()), 1e-3, &c).unwrap())
+        .collect();
+    let other = pair_spec(&ShapeDesc::new(0, tagged(40)), &ShapeDesc::new(3, ball), 1e-3, &c).unwrap();
+    let grid = |p: &PairSpec| match &p.sdf {
+        SdfShape::Grid(g) => g.clone(),
+        s => panic!("expected a grid, got {s:?}"),
+    };
+    assert!(Arc::ptr_eq(&grid(&pairs[0]), &grid(&pairs[1])) && Arc::ptr_eq(&grid(&pairs[0]), &grid(&pairs[2])));
+    assert!(!Arc::ptr_eq(&grid(&pairs[0]), &grid(&other)));
+    // Uploaded once: the flattened model holds one grid's 16-bit values (two per word).
+    let g = grid(&pairs[0]);
+    let one_grid_words = g.values.len().div_ceil(2);
+    let flat = ContactModel { body_count: 4, pairs }.flatten(256).unwrap();
+    assert!(
+        flat.sdf_values.len() < 2 * one_grid_words,
+        "{} words for a {one_grid_words}-word grid",
+        flat.sdf_values.len()
+    );
+    std::fs::remove_dir_all(dir).ok();
+}
+
+/// Regression: flattening with 0 triangles per job ran until the process was killed for memory.
+#[test]
+fn flattening_with_a_bad_chunk_is_refused_naming_it() {
+    let pair = pair_spec(
+        &ShapeDesc::new(0, ShapeGeometry::Sphere { radius: 0.01 }),
+        &ShapeDesc::fixed((Vec3::ZERO, Quat::IDENTITY), ShapeGeometry::Plane),
+        1e-3,
+        &cache("chunk").0,
+    )
+    .unwrap();
+    let model = ContactModel { body_count: 1, pairs: vec![pair] };
+    for bad in [0, 100] {
+        let e = model.flatten(bad).unwrap_err().to_string();
+        assert!(e.contains("chunk") && e.contains("multiple of 256"), "{e}");
+    }
+    assert!(model.flatten(256).is_ok());
+}

@@ -176,6 +176,14 @@ fn quat4(q: Quat) -> [f32; 4] {
 impl ContactModel {
     /// Flattens the model; `chunk` query triangles per job (a multiple of 256).
     pub fn flatten(&self, chunk: u32) -> Result<FlatModel> {
+        // Regression: chunk 0 split every pair into endless empty jobs until the process ran out of memory.
+        if chunk == 0 || chunk % 256 != 0 {
+            return Err(EngineError::Config {
+                field: "chunk",
+                value: chunk.to_string(),
+                expected: "query triangles per job: a multiple of 256 (256, 512, ...)".into(),
+            });
+        }
         let mut flat = FlatModel::default();
         let mut query_first: Vec<(*const QueryShape, u32)> = Vec::new();
         let mut grid_offset: Vec<(*const SdfGrid, u32)> = Vec::new();

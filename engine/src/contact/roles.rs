@@ -34,9 +34,10 @@
 //! (e.g. facing a box face, away from its edges).
 //!
 //! Convex hulls are computed with parry3d's quickhull ([`parry3d::transformation::try_convex_hull`]).
-//! Grids are baked through the given [`SdfCache`]. Every call builds fresh `Arc`s for its query shape and
-//! grid, so two pairs built from the same mesh upload it twice (sharing across pairs is the caller's
-//! business: clone the `Arc`s of an existing [`PairSpec`]).
+//! Grids are baked through the given [`SdfCache`] with [`SdfCache::get_or_bake_shared`], so pairs whose
+//! SDF shape is the same mesh at the same resolution share one grid (uploaded once). Every call builds a
+//! fresh `Arc` for its query shape, so a mesh queried by two pairs is uploaded twice (clone the `Arc` of an
+//! existing [`PairSpec`] to share it).
 
 use super::{pair_role, PairRole, PairSpec, QueryShape, SdfShape, NO_BODY};
 use crate::error::{EngineError, Result};
@@ -200,7 +201,7 @@ fn sdf_preference(g: &ShapeGeometry) -> u8 {
 }
 
 fn bake_mesh(mesh: &TriMesh, resolution: u32, cache: &SdfCache) -> Result<SdfShape> {
-    Ok(SdfShape::Grid(Arc::new(cache.get_or_bake(mesh, &BakeParams { resolution, ..Default::default() })?)))
+    Ok(SdfShape::Grid(cache.get_or_bake_shared(mesh, &BakeParams { resolution, ..Default::default() })?))
 }
 
 /// An exact analytic distance sampled on the grid the baker would use for a box of half extents `aabb`.

@@ -45,12 +45,15 @@ const CHECKSUM_AT: usize = 48;
 #[derive(Clone, Debug)]
 pub struct SdfCache {
     dir: PathBuf,
+    /// Grids handed out by [`get_or_bake_shared`](Self::get_or_bake_shared), by entry key, while anyone
+    /// holds them (shared by clones of this cache).
+    loaded: std::sync::Arc<std::sync::Mutex<std::collections::HashMap<String, std::sync::Weak<SdfGrid>>>>,
 }
 
 impl SdfCache {
     /// A cache in `dir` (created on the first write).
     pub fn new(dir: impl Into<PathBuf>) -> Self {
-        SdfCache { dir: dir.into() }
+        SdfCache { dir: dir.into(), loaded: Default::default() }
     }
 
     /// `$FACTORY_CACHE_DIR` if set (used as the SDF directory itself), else `$HOME/.cache/factory-rs/sdf`,
@@ -128,6 +131,26 @@ impl SdfCache {
 
     /// The cached SDF of this bake, or a fresh bake stored for next time. An unreadable, corrupt or
     /// mismatching entry is logged and replaced. Failing to store the result is logged, not returned.
+    /// As [`get_or_bake`](Self::get_or_bake), but every caller asking for the same mesh and parameters while
+    /// an earlier result is still alive gets that same grid (one allocation, and one upload: the contact
+    /// model uploads a grid once per `Arc`). Pairs built from one mesh, as in a pile of identical parts,
+    /// share their SDF this way.
+    pub fn get_or_bake_shared(&self, mesh: &TriMesh, params: &BakeParams) -> Result<std::sync::Arc<SdfGrid>> {
+        let key = Self::key(mesh, params);
+        if let Some(grid) = self.loaded.lock().unwrap_or_else(|e| e.into_inner()).get(&key).and_then(|w| w.upgrade()) {
+            return Ok(grid);
+        }
+        let grid = std::sync::Arc::new(self.get_or_bake(mesh, params)?);
+        let mut loaded = self.loaded.lock().unwrap_or_else(|e| e.into_inner());
+        loaded.retain(|_, w| w.strong_count() > 0);
+        // Another thread may have loaded it meanwhile: keep the first, so all callers share one grid.
+        if let Some(first) = loaded.get(&key).and_then(|w| w.upgrade()) {
+            return Ok(first);
+        }
+        loaded.insert(key, std::sync::Arc::downgrade(&grid));
+        Ok(grid)
+    }
+
     pub fn get_or_bake(&self, mesh: &TriMesh, params: &BakeParams) -> Result<SdfGrid> {
         // Validates the parameters and the memory limit even on a hit, and says what a hit must look like.
         let expect = layout(mesh, params)?;
