@@ -101,7 +101,11 @@ impl SdfCache {
 
     /// Where the entry for this bake lives (whether or not it exists).
     pub fn entry_path(&self, mesh: &TriMesh, params: &BakeParams) -> PathBuf {
-        self.dir.join(format!("{}.{ENTRY_EXTENSION}", Self::key(mesh, params)))
+        self.key_path(&Self::key(mesh, params))
+    }
+
+    fn key_path(&self, key: &str) -> PathBuf {
+        self.dir.join(format!("{key}.{ENTRY_EXTENSION}"))
     }
 
     /// Whether a file name is a cache entry's (temporary files of interrupted writes are not).
@@ -129,8 +133,6 @@ impl SdfCache {
         Ok(out)
     }
 
-    /// The cached SDF of this bake, or a fresh bake stored for next time. An unreadable, corrupt or
-    /// mismatching entry is logged and replaced. Failing to store the result is logged, not returned.
     /// As [`get_or_bake`](Self::get_or_bake), but every caller asking for the same mesh and parameters while
     /// an earlier result is still alive gets that same grid (one allocation, and one upload: the contact
     /// model uploads a grid once per `Arc`). Pairs built from one mesh, as in a pile of identical parts,
@@ -140,7 +142,7 @@ impl SdfCache {
         if let Some(grid) = self.loaded.lock().unwrap_or_else(|e| e.into_inner()).get(&key).and_then(|w| w.upgrade()) {
             return Ok(grid);
         }
-        let grid = std::sync::Arc::new(self.get_or_bake(mesh, params)?);
+        let grid = std::sync::Arc::new(self.get_or_bake_at(&self.key_path(&key), mesh, params)?);
         let mut loaded = self.loaded.lock().unwrap_or_else(|e| e.into_inner());
         loaded.retain(|_, w| w.strong_count() > 0);
         // Another thread may have loaded it meanwhile: keep the first, so all callers share one grid.
@@ -151,11 +153,17 @@ impl SdfCache {
         Ok(grid)
     }
 
+    /// The cached SDF of this bake, or a fresh bake stored for next time. An unreadable, corrupt or
+    /// mismatching entry is logged and replaced. Failing to store the result is logged, not returned.
     pub fn get_or_bake(&self, mesh: &TriMesh, params: &BakeParams) -> Result<SdfGrid> {
+        self.get_or_bake_at(&self.entry_path(mesh, params), mesh, params)
+    }
+
+    /// [`get_or_bake`](Self::get_or_bake) with the entry's path already known (hashing a mesh is not free).
+    fn get_or_bake_at(&self, path: &Path, mesh: &TriMesh, params: &BakeParams) -> Result<SdfGrid> {
         // Validates the parameters and the memory limit even on a hit, and says what a hit must look like.
         let expect = layout(mesh, params)?;
-        let path = self.entry_path(mesh, params);
-        match load(&path) {
+        match load(path) {
             Ok(grid) if grid.dims == expect.dims && grid.origin == expect.origin && grid.spacing == expect.spacing => {
                 log::debug!("SDF cache hit: {}", path.display());
                 return Ok(grid);
@@ -174,7 +182,7 @@ impl SdfCache {
             Err(e) => log::warn!("SDF cache entry unusable, rebaking: {e}"),
         }
         let grid = bake(mesh, params)?;
-        if let Err(e) = save(&path, &grid) {
+        if let Err(e) = save(path, &grid) {
             log::warn!("SDF cache: could not store the bake: {e}");
         }
         Ok(grid)

@@ -210,16 +210,7 @@ pub fn step_cpu(
         pos.push((Vec3::ZERO, Quat::IDENTITY));
         let mut vel: Vec<[Vec3; 2]> = state.body_qd[base..base + nb].to_vec();
         vel.push([Vec3::ZERO; 2]);
-        let inv_m = |i: usize| if i < nb { model.body_inv_mass[i] } else { 0.0 };
-        let com = |i: usize| if i < nb { model.body_com[i] } else { Vec3::ZERO };
-        let inv_i_world = |i: usize, q: Quat| {
-            if i < nb && model.body_inv_mass[i] > 0.0 {
-                let r = Mat3::from_quat(q);
-                r * model.body_inv_inertia[i] * r.transpose()
-            } else {
-                Mat3::ZERO
-            }
-        };
+        let ctx = Step { flat, model, cfg, h };
         let body = |b: u32| if b == NO_BODY { nb } else { b as usize };
         // Rows from the reduced contacts, anchored in the bodies' frames at generation time.
         let mut rows = Vec::new();
@@ -227,8 +218,10 @@ pub fn step_cpu(
             let (a, b) = (body(flat.pairs[p].body_a), body(flat.pairs[p].body_b));
             let tol = WARM_DISTANCE * flat.pairs[p].contact_offset;
             for (i, patch) in contacts.patches[w * pair_count + p].iter().enumerate() {
-                // Last frame's rows of the same patch (rows are in (pair, patch, slot) order).
-                let old: Vec<&Row> = warm.rows[w].iter().filter(|o| o.pair == p && o.patch == i).collect();
+                // Last frame's rows of the same patch (rows are sorted by (pair, patch), then slot).
+                let prev = &warm.rows[w];
+                let old = &prev[prev.partition_point(|o| (o.pair, o.patch) < (p, i))
+                    ..prev.partition_point(|o| (o.pair, o.patch) <= (p, i))];
                 for c in &patch.contacts {
                     let ((pa, qa), (pb, qb)) = (pos[a], pos[b]);
                     let mut row = Row {
@@ -246,7 +239,7 @@ pub fn step_cpu(
                     };
                     // Warm start: the closest of them that was the same contact hands over its impulses.
                     let mut best: Option<(f32, &Row)> = None;
-                    for o in &old {
+                    for o in old {
                         let Some(n) = o.normal else { continue };
                         let d = o.anchor_a.distance(row.anchor_a);
                         if n.dot(patch.normal) >= WARM_COS
@@ -266,7 +259,7 @@ pub fn step_cpu(
         }
         for _ in 0..cfg.substeps {
             for (i, v) in vel.iter_mut().enumerate().take(nb) {
-                if inv_m(i) > 0.0 {
+                if ctx.inv_m(i) > 0.0 {
                     v[0] += model.gravity * h;
                 }
             }
@@ -275,38 +268,29 @@ pub fn step_cpu(
             // the current substep (accumulated and clamped per substep).
             for r in rows.iter() {
                 if let Some(n) = r.normal {
-                    let (pa, qa) = pos[r.a];
-                    let (pb, qb) = pos[r.b];
-                    let xa = pa + qa * r.anchor_a - flat.pairs[r.pair].radius * n;
-                    let ra = xa - (pa + qa * com(r.a));
-                    let rb = xa - (pb + qb * com(r.b));
                     let t1 = n.any_orthonormal_vector();
                     let imp = r.lambda_n * n + r.lambda_t[0] * t1 + r.lambda_t[1] * n.cross(t1);
-                    let (ia, ib) = (inv_i_world(r.a, qa), inv_i_world(r.b, qb));
-                    vel[r.a][0] += inv_m(r.a) * imp;
-                    vel[r.a][1] += ia * ra.cross(imp);
-                    vel[r.b][0] -= inv_m(r.b) * imp;
-                    vel[r.b][1] -= ib * rb.cross(imp);
+                    ctx.apply(r, &ctx.lever(r, &pos, n), &mut vel, imp);
                 }
             }
             // The poses stand still during the sweeps, so each row's separation and normal are sampled in
             // the first sweep and reused by the others (sampled again once the bodies have moved).
             for it in 0..cfg.pos_iters {
-                solve_rows(&mut rows, flat, &pos, &mut vel, &inv_m, &com, &inv_i_world, h, cfg, true, it == 0);
+                solve_rows(&ctx, &mut rows, &pos, &mut vel, true, it == 0);
             }
             for i in 0..nb {
-                if inv_m(i) > 0.0 || model.is_kinematic(i) {
+                if ctx.inv_m(i) > 0.0 || model.is_kinematic(i) {
                     let (p, q) = pos[i];
-                    let c = p + q * com(i);
+                    let c = p + q * ctx.com(i);
                     let c2 = c + vel[i][0] * h;
                     let w = vel[i][1];
                     let dq = Quat::from_xyzw(w.x, w.y, w.z, 0.0) * q * (0.5 * h);
                     let q2 = Quat::from_vec4(Vec4::from(q) + Vec4::from(dq)).normalize();
-                    pos[i] = (c2 - q2 * com(i), q2);
+                    pos[i] = (c2 - q2 * ctx.com(i), q2);
                 }
             }
             for it in 0..cfg.vel_iters {
-                solve_rows(&mut rows, flat, &pos, &mut vel, &inv_m, &com, &inv_i_world, h, cfg, false, it == 0);
+                solve_rows(&ctx, &mut rows, &pos, &mut vel, false, it == 0);
             }
         }
         warm.rows[w] = rows;
@@ -323,136 +307,143 @@ pub fn step_cpu(
     ok
 }
 
-#[allow(clippy::too_many_arguments)]
-fn solve_rows(
-    rows: &mut [Row],
-    flat: &FlatModel,
-    pos: &[(Vec3, Quat)],
-    vel: &mut [[Vec3; 2]],
-    inv_m: &dyn Fn(usize) -> f32,
-    com: &dyn Fn(usize) -> Vec3,
-    inv_i_world: &dyn Fn(usize, Quat) -> Mat3,
+/// What every row of one world's step reads: the contact model, the bodies, the settings and the substep.
+/// Body index `model.body_count()` is the static world (infinite mass, identity pose).
+struct Step<'a> {
+    flat: &'a FlatModel,
+    model: &'a BodyModel,
+    cfg: &'a SolverConfig,
+    /// Substep length [s].
     h: f32,
-    cfg: &SolverConfig,
-    bias: bool,
-    resample: bool,
-) {
-    // Runs of rows of one patch (rows are in (pair, patch, slot) order): each run is swept once with
-    // `resample`, then patch_iters - 1 more times on the sampled geometry (solver.wgsl's sweep).
-    let mut start = 0;
-    while start < rows.len() {
-        let key = (rows[start].pair, rows[start].patch);
-        let end = start + rows[start..].iter().take_while(|r| (r.pair, r.patch) == key).count();
-        for pass in 0..cfg.patch_iters {
-            solve_rows_once(
-                &mut rows[start..end],
-                flat,
-                pos,
-                vel,
-                inv_m,
-                com,
-                inv_i_world,
-                h,
-                cfg,
-                bias,
-                resample && pass == 0,
-            );
+}
+
+impl Step<'_> {
+    fn inv_m(&self, i: usize) -> f32 {
+        self.model.body_inv_mass.get(i).copied().unwrap_or(0.0)
+    }
+
+    fn com(&self, i: usize) -> Vec3 {
+        self.model.body_com.get(i).copied().unwrap_or(Vec3::ZERO)
+    }
+
+    /// World-frame inverse inertia of body `i` at rotation `q` (zero for static and kinematic bodies).
+    fn inv_i_world(&self, i: usize, q: Quat) -> Mat3 {
+        if self.inv_m(i) > 0.0 {
+            let r = Mat3::from_quat(q);
+            r * self.model.body_inv_inertia[i] * r.transpose()
+        } else {
+            Mat3::ZERO
         }
-        start = end;
+    }
+
+    /// The row's lever arms and the bodies' world inverse inertias, for contact normal `n`.
+    fn lever(&self, r: &Row, pos: &[(Vec3, Quat)], n: Vec3) -> Lever {
+        let ((pa, qa), (pb, qb)) = (pos[r.a], pos[r.b]);
+        // The contact point on a's surface.
+        let xa = pa + qa * r.anchor_a - self.flat.pairs[r.pair].radius * n;
+        Lever {
+            ra: xa - (pa + qa * self.com(r.a)),
+            rb: xa - (pb + qb * self.com(r.b)),
+            ia: self.inv_i_world(r.a, qa),
+            ib: self.inv_i_world(r.b, qb),
+        }
+    }
+
+    /// Applies impulse `imp` [N s] to a and its opposite to b.
+    fn apply(&self, r: &Row, l: &Lever, vel: &mut [[Vec3; 2]], imp: Vec3) {
+        vel[r.a][0] += self.inv_m(r.a) * imp;
+        vel[r.a][1] += l.ia * l.ra.cross(imp);
+        vel[r.b][0] -= self.inv_m(r.b) * imp;
+        vel[r.b][1] -= l.ib * l.rb.cross(imp);
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn solve_rows_once(
-    rows: &mut [Row],
-    flat: &FlatModel,
-    pos: &[(Vec3, Quat)],
-    vel: &mut [[Vec3; 2]],
-    inv_m: &dyn Fn(usize) -> f32,
-    com: &dyn Fn(usize) -> Vec3,
-    inv_i_world: &dyn Fn(usize, Quat) -> Mat3,
-    h: f32,
-    cfg: &SolverConfig,
-    bias: bool,
-    resample: bool,
-) {
-    for r in rows.iter_mut() {
-        let (pa, qa) = pos[r.a];
-        let (pb, qb) = pos[r.b];
-        let pair = &flat.pairs[r.pair];
-        let x = pa + qa * r.anchor_a;
-        let (n, s) = if resample {
-            // The SDF shape's frame: body b's pose times the shape's pose on it.
-            let body_b = Xf { p: pb, q: Vec4::from(qb) };
-            let shape_b = body_b.mul(&Xf {
-                p: Vec3::new(pair.b_pos[0], pair.b_pos[1], pair.b_pos[2]),
-                q: Vec4::from_array(pair.b_rot),
-            });
-            let (phi, g) = sdf_sample_cpu(pair, &flat.sdf_values, shape_b.inv().point(x));
-            let glen = g.length();
-            if glen <= 0.0 {
-                r.normal = None;
+/// Lever arms from each body's centre of mass to a row's contact point [m] and the bodies' world-frame
+/// inverse inertias [1/(kg m^2)] (zero for static and kinematic bodies).
+struct Lever {
+    ra: Vec3,
+    rb: Vec3,
+    ia: Mat3,
+    ib: Mat3,
+}
+
+/// One sweep over the rows, in (pair, patch, slot) order: each patch's rows are solved once with
+/// `resample`, then `patch_iters - 1` more times on the sampled geometry (solver.wgsl's `sweep`).
+fn solve_rows(ctx: &Step, rows: &mut [Row], pos: &[(Vec3, Quat)], vel: &mut [[Vec3; 2]], bias: bool, resample: bool) {
+    for patch in rows.chunk_by_mut(|x, y| (x.pair, x.patch) == (y.pair, y.patch)) {
+        for pass in 0..ctx.cfg.patch_iters {
+            for r in patch.iter_mut() {
+                solve_row(ctx, r, pos, vel, bias, resample && pass == 0);
+            }
+        }
+    }
+}
+
+/// One Gauss-Seidel update of one row (solver.wgsl's `solve_row`).
+fn solve_row(ctx: &Step, r: &mut Row, pos: &[(Vec3, Quat)], vel: &mut [[Vec3; 2]], bias: bool, resample: bool) {
+    let (cfg, h) = (ctx.cfg, ctx.h);
+    let ((pa, qa), (pb, qb)) = (pos[r.a], pos[r.b]);
+    let pair = &ctx.flat.pairs[r.pair];
+    let x = pa + qa * r.anchor_a;
+    let (n, s) = if resample {
+        // The SDF shape's frame: body b's pose times the shape's pose on it.
+        let body_b = Xf { p: pb, q: Vec4::from(qb) };
+        let shape_b = body_b
+            .mul(&Xf { p: Vec3::new(pair.b_pos[0], pair.b_pos[1], pair.b_pos[2]), q: Vec4::from_array(pair.b_rot) });
+        let (phi, g) = sdf_sample_cpu(pair, &ctx.flat.sdf_values, shape_b.inv().point(x));
+        let glen = g.length();
+        if glen <= 0.0 {
+            r.normal = None;
+            return;
+        }
+        let n = shape_b.rotate(g / glen);
+        r.normal = Some(n);
+        r.sep = phi - pair.radius - cfg.rest_offset;
+        (n, r.sep)
+    } else {
+        match r.normal {
+            Some(n) => (n, r.sep),
+            None => return,
+        }
+    };
+    let l = ctx.lever(r, pos, n);
+    let (Lever { ra, rb, ia, ib }, ma, mb) = (&l, ctx.inv_m(r.a), ctx.inv_m(r.b));
+    let rel = |vel: &[[Vec3; 2]]| (vel[r.a][0] + vel[r.a][1].cross(*ra)) - (vel[r.b][0] + vel[r.b][1].cross(*rb));
+    let eff = |d: Vec3| {
+        let (ca, cb) = (ra.cross(d), rb.cross(d));
+        ma + mb + ca.dot(*ia * ca) + cb.dot(*ib * cb)
+    };
+    let k = eff(n);
+    if k <= 0.0 {
+        return;
+    }
+    // Normal: speculative when separated, bounded depenetration when penetrating.
+    let target = if s > 0.0 {
+        -s / h
+    } else if bias {
+        (-s / h).min(cfg.max_depenetration_velocity)
+    } else {
+        0.0
+    };
+    let vn = rel(vel).dot(n);
+    let new = (r.lambda_n + (target - vn) / k).max(0.0);
+    let d = new - r.lambda_n;
+    r.lambda_n = new;
+    ctx.apply(r, &l, vel, n * d);
+    if r.mu > 0.0 {
+        let t1 = n.any_orthonormal_vector();
+        let t2 = n.cross(t1);
+        let limit = r.mu * r.lambda_n;
+        for (j, t) in [t1, t2].into_iter().enumerate() {
+            let kt = eff(t);
+            if kt <= 0.0 {
                 continue;
             }
-            let n = shape_b.rotate(g / glen);
-            r.normal = Some(n);
-            r.sep = phi - pair.radius - cfg.rest_offset;
-            (n, r.sep)
-        } else {
-            match r.normal {
-                Some(n) => (n, r.sep),
-                None => continue,
-            }
-        };
-        // The contact point on a's surface.
-        let xa = x - pair.radius * n;
-        let ra = xa - (pa + qa * com(r.a));
-        let rb = xa - (pb + qb * com(r.b));
-        let (ia, ib) = (inv_i_world(r.a, qa), inv_i_world(r.b, qb));
-        let (ma, mb) = (inv_m(r.a), inv_m(r.b));
-        let rel = |vel: &[[Vec3; 2]]| (vel[r.a][0] + vel[r.a][1].cross(ra)) - (vel[r.b][0] + vel[r.b][1].cross(rb));
-        let eff = |d: Vec3| {
-            let (ca, cb) = (ra.cross(d), rb.cross(d));
-            ma + mb + ca.dot(ia * ca) + cb.dot(ib * cb)
-        };
-        let apply = |vel: &mut [[Vec3; 2]], imp: Vec3| {
-            vel[r.a][0] += ma * imp;
-            vel[r.a][1] += ia * ra.cross(imp);
-            vel[r.b][0] -= mb * imp;
-            vel[r.b][1] -= ib * rb.cross(imp);
-        };
-        let k = eff(n);
-        if k <= 0.0 {
-            continue;
-        }
-        // Normal: speculative when separated, bounded depenetration when penetrating.
-        let target = if s > 0.0 {
-            -s / h
-        } else if bias {
-            (-s / h).min(cfg.max_depenetration_velocity)
-        } else {
-            0.0
-        };
-        let vn = rel(vel).dot(n);
-        let new = (r.lambda_n + (target - vn) / k).max(0.0);
-        let d = new - r.lambda_n;
-        r.lambda_n = new;
-        apply(vel, n * d);
-        if r.mu > 0.0 {
-            let t1 = n.any_orthonormal_vector();
-            let t2 = n.cross(t1);
-            let limit = r.mu * r.lambda_n;
-            for (j, t) in [t1, t2].into_iter().enumerate() {
-                let kt = eff(t);
-                if kt <= 0.0 {
-                    continue;
-                }
-                let vt = rel(vel).dot(t);
-                let new = (r.lambda_t[j] - vt / kt).clamp(-limit, limit);
-                let d = new - r.lambda_t[j];
-                r.lambda_t[j] = new;
-                apply(vel, t * d);
-            }
+            let vt = rel(vel).dot(t);
+            let new = (r.lambda_t[j] - vt / kt).clamp(-limit, limit);
+            let d = new - r.lambda_t[j];
+            r.lambda_t[j] = new;
+            ctx.apply(r, &l, vel, t * d);
         }
     }
 }
