@@ -16,7 +16,7 @@ use factory_engine::contact::{ContactConfig, ContactModel, ContactPipeline, Tran
 use factory_engine::gpu::GpuContext;
 use factory_engine::sdf::cache::SdfCache;
 use factory_engine::solver::gpu::GpuSolver;
-use factory_engine::solver::{step_cpu, BodyModel, BodyState, SolverConfig, WarmStart};
+use factory_engine::solver::{step_cpu_with_pipeline, BodyModel, BodyState, SolverConfig, WarmStart};
 use glam::{Quat, Vec3};
 use std::sync::{Arc, OnceLock};
 
@@ -126,11 +126,8 @@ fn run_in(
             assert!(ok[0], "GPU solver: world diverged (frame {f})");
             state = s;
         } else {
-            pipe.write_body_q(gpu, &state.body_q);
-            pipe.run(gpu);
-            let contacts = pipe.read(gpu);
             assert!(
-                step_cpu(&bodies, &mut state, &contacts, &pipe.flat, &cfg, &mut warm)[0],
+                step_cpu_with_pipeline(gpu, &pipe, &bodies, &mut state, &cfg, &mut warm)[0],
                 "CPU reference: world diverged (frame {f})"
             );
         }

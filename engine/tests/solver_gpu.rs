@@ -6,7 +6,7 @@ use factory_engine::contact::{
 };
 use factory_engine::gpu::GpuContext;
 use factory_engine::solver::gpu::GpuSolver;
-use factory_engine::solver::{step_cpu, BodyModel, BodyState, SolverConfig, WarmStart};
+use factory_engine::solver::{step_cpu, step_cpu_with_pipeline, BodyModel, BodyState, SolverConfig, WarmStart};
 use glam::{Mat3, Quat, Vec3};
 use std::sync::Arc;
 
@@ -127,10 +127,7 @@ fn warm_started_gpu_run_matches_the_cpu_reference() {
     let (mut worst_p, mut worst_v, mut moved) = (0.0f32, 0.0f32, 0.0f32);
     for f in 0..60 {
         frame(g, &gpu_pipe, &solver);
-        cpu_pipe.write_body_q(g, &cpu.body_q);
-        cpu_pipe.run(g);
-        let c = cpu_pipe.read(g);
-        assert!(step_cpu(&bodies, &mut cpu, &c, &cpu_pipe.flat, &cfg, &mut warm)[0]);
+        assert!(step_cpu_with_pipeline(g, &cpu_pipe, &bodies, &mut cpu, &cfg, &mut warm)[0]);
         let (gs, ok) = solver.read_state(g, &gpu_pipe);
         assert!(ok[0]);
         let dp = (Vec3::from_slice(&gs.body_q[0].p[..3]) - Vec3::from_slice(&cpu.body_q[0].p[..3])).length();

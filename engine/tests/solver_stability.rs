@@ -15,7 +15,7 @@ use factory_engine::contact::{ContactConfig, ContactModel, ContactPipeline, Pair
 use factory_engine::gpu::GpuContext;
 use factory_engine::sdf::cache::SdfCache;
 use factory_engine::solver::gpu::GpuSolver;
-use factory_engine::solver::{step_cpu, BodyModel, BodyState, SolverConfig, WarmStart};
+use factory_engine::solver::{step_cpu_with_pipeline, BodyModel, BodyState, SolverConfig, WarmStart};
 use glam::{Mat3, Quat, Vec3};
 
 const G: f32 = 9.81;
@@ -119,10 +119,7 @@ impl Sim {
             assert!(ok[0], "{}: world diverged", self.who());
             self.state = s;
         } else {
-            self.pipe.write_body_q(g, &self.state.body_q);
-            self.pipe.run(g);
-            let contacts = self.pipe.read(g);
-            let ok = step_cpu(&self.bodies, &mut self.state, &contacts, &self.pipe.flat, &self.cfg, &mut self.warm);
+            let ok = step_cpu_with_pipeline(g, &self.pipe, &self.bodies, &mut self.state, &self.cfg, &mut self.warm);
             assert!(ok[0], "{}: world diverged", self.who());
         }
         &self.state

@@ -307,6 +307,21 @@ pub fn step_cpu(
     ok
 }
 
+/// One frame of the CPU reference on contacts from `contacts` (the GPU kernels) at the state's poses: what
+/// the tests compare the GPU solver with. Returns [`step_cpu`]'s per-world flags.
+pub fn step_cpu_with_pipeline(
+    gpu: &crate::gpu::GpuContext,
+    contacts: &crate::contact::ContactPipeline,
+    model: &BodyModel,
+    state: &mut BodyState,
+    cfg: &SolverConfig,
+    warm: &mut WarmStart,
+) -> Vec<bool> {
+    contacts.write_body_q(gpu, &state.body_q);
+    contacts.run(gpu);
+    step_cpu(model, state, &contacts.read(gpu), &contacts.flat, cfg, warm)
+}
+
 /// What every row of one world's step reads: the contact model, the bodies, the settings and the substep.
 /// Body index `model.body_count()` is the static world (infinite mass, identity pose).
 struct Step<'a> {
