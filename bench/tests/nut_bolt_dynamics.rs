@@ -9,7 +9,7 @@ use factory_bench::scene::TurnCounter;
 use factory_engine::contact::{ContactConfig, ContactPipeline};
 use factory_engine::gpu::GpuContext;
 use factory_engine::solver::gpu::GpuSolver;
-use factory_engine::solver::{step_cpu_with_pipeline, BodyModel, BodyState, SolverConfig, WarmStart};
+use factory_engine::solver::{step_cpu_with_pipeline, BodyModel, BodyState, Control, SolverConfig, WarmStart};
 use glam::Vec3;
 
 /// Descent after 1 s within 5% of the analytic value (the tolerance).
@@ -61,7 +61,7 @@ fn release_nut(mu: f32, frames: u32, on_gpu: bool, substeps: u32) -> Run {
             assert!(ok[0], "world diverged");
             state = s;
         } else {
-            let ok = step_cpu_with_pipeline(gpu, &pipe, &model, &mut state, &cfg, &mut warm);
+            let ok = step_cpu_with_pipeline(gpu, &pipe, &model, &mut state, &cfg, &Control::default(), &mut warm);
             assert!(ok[0], "world diverged");
         }
         yaw.update(&state.body_q[0]);

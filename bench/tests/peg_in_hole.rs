@@ -16,7 +16,7 @@ use factory_engine::contact::{ContactConfig, ContactModel, ContactPipeline, Tran
 use factory_engine::gpu::GpuContext;
 use factory_engine::sdf::cache::SdfCache;
 use factory_engine::solver::gpu::GpuSolver;
-use factory_engine::solver::{step_cpu_with_pipeline, BodyModel, BodyState, SolverConfig, WarmStart};
+use factory_engine::solver::{step_cpu_with_pipeline, BodyModel, BodyState, Control, SolverConfig, WarmStart};
 use glam::{Quat, Vec3};
 use std::sync::{Arc, OnceLock};
 
@@ -127,7 +127,7 @@ fn run_in(
             state = s;
         } else {
             assert!(
-                step_cpu_with_pipeline(gpu, &pipe, &bodies, &mut state, &cfg, &mut warm)[0],
+                step_cpu_with_pipeline(gpu, &pipe, &bodies, &mut state, &cfg, &Control::default(), &mut warm)[0],
                 "CPU reference: world diverged (frame {f})"
             );
         }

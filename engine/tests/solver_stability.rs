@@ -15,7 +15,7 @@ use factory_engine::contact::{ContactConfig, ContactModel, ContactPipeline, Pair
 use factory_engine::gpu::GpuContext;
 use factory_engine::sdf::cache::SdfCache;
 use factory_engine::solver::gpu::GpuSolver;
-use factory_engine::solver::{step_cpu_with_pipeline, BodyModel, BodyState, SolverConfig, WarmStart};
+use factory_engine::solver::{step_cpu_with_pipeline, BodyModel, BodyState, Control, SolverConfig, WarmStart};
 use glam::{Mat3, Quat, Vec3};
 
 const G: f32 = 9.81;
@@ -119,7 +119,15 @@ impl Sim {
             assert!(ok[0], "{}: world diverged", self.who());
             self.state = s;
         } else {
-            let ok = step_cpu_with_pipeline(g, &self.pipe, &self.bodies, &mut self.state, &self.cfg, &mut self.warm);
+            let ok = step_cpu_with_pipeline(
+                g,
+                &self.pipe,
+                &self.bodies,
+                &mut self.state,
+                &self.cfg,
+                &Control::default(),
+                &mut self.warm,
+            );
             assert!(ok[0], "{}: world diverged", self.who());
         }
         &self.state

@@ -1,7 +1,7 @@
 //! The rigid-body step on the GPU (solver.wgsl): pipeline, buffers and dispatch. Its CPU reference is
 //! [`super::step_cpu`]; `engine/tests/solver_gpu.rs` checks parity and bitwise determinism.
 
-use super::{BodyModel, BodyState, SolverConfig};
+use super::{BodyModel, BodyState, Control, SolverConfig};
 use crate::contact::generate::{compute_pipeline, shader_source, SdfKinds};
 use crate::contact::ContactPipeline;
 use crate::error::{EngineError, Result};
@@ -102,11 +102,13 @@ pub struct GpuSolver {
     pub cfg: SolverConfig,
     /// Body velocities (linear, angular) [m/s, rad/s], shape [world_count * body_count * 2] vec4.
     pub body_qd: wgpu::Buffer,
-    /// [world_count] status vec4 (x: 1 ok, 0 diverged; y: rows used), then the rows.
+    /// [world_count] status vec4 (x: 1 ok, 0 diverged; y: rows used), then the external wrenches
+    /// ([world_count * body_count] x (force, torque) vec4, [`Control::body_f`]), then the rows.
     pub scratch: wgpu::Buffer,
     pipeline: wgpu::ComputePipeline,
     groups: [wgpu::BindGroup; 3],
     world_count: u32,
+    body_count: u32,
 }
 
 impl GpuSolver {
@@ -188,7 +190,8 @@ impl GpuSolver {
         let bodies_buf = gpu.storage_buffer("bodies", &bodies, none);
         let nbw = (world_count * contacts.body_count) as u64;
         let body_qd = gpu.storage_buffer_zeroed("body_qd", nbw * 2 * 16);
-        let scratch_bytes = (world_count as u64 + world_count as u64 * max_rows as u64 * 4) * 16;
+        let scratch_bytes =
+            (world_count as u64 * (1 + 2 * contacts.body_count as u64) + world_count as u64 * max_rows as u64 * 4) * 16;
         if scratch_bytes > gpu.limits().max_storage_buffer_binding_size {
             return Err(EngineError::TooLarge {
                 what: format!("solver rows for {world_count} worlds x {max_rows} contacts"),
@@ -210,7 +213,15 @@ impl GpuSolver {
             group(1, &[&contacts.patches, &contacts.patch_counts]),
             group(2, &[&contacts.body_q, &body_qd, &scratch]),
         ];
-        Ok(GpuSolver { cfg: cfg.clone(), body_qd, scratch, pipeline, groups, world_count })
+        Ok(GpuSolver {
+            cfg: cfg.clone(),
+            body_qd,
+            scratch,
+            pipeline,
+            groups,
+            world_count,
+            body_count: contacts.body_count,
+        })
     }
 
     /// Uploads a state (poses go to the contact pipeline's body_q); every world starts cold (its
@@ -225,11 +236,35 @@ impl GpuSolver {
         }
     }
 
-    /// Forgets every world's warm-start impulses (the twin of a fresh [`super::WarmStart`]).
+    /// Forgets every world's warm-start impulses (the twin of a fresh [`super::WarmStart`]); the
+    /// external wrenches stay.
     pub fn forget_warm_start(&self, gpu: &GpuContext) {
+        let (status, control) = self.control_range();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        enc.clear_buffer(&self.scratch, 0, None);
+        enc.clear_buffer(&self.scratch, 0, Some(status));
+        enc.clear_buffer(&self.scratch, status + control, None);
         gpu.queue.submit([enc.finish()]);
+    }
+
+    /// Byte offset and size of the external wrenches in the scratch buffer (solver.wgsl's control_index).
+    fn control_range(&self) -> (u64, u64) {
+        (self.world_count as u64 * 16, self.world_count as u64 * self.body_count as u64 * 32)
+    }
+
+    /// Sets the external wrenches applied from the next step on (they stay until set again). An empty
+    /// `control` clears them; otherwise `body_f` must have world_count * body_count entries.
+    pub fn write_control(&self, gpu: &GpuContext, control: &Control) {
+        let (offset, size) = self.control_range();
+        if control.body_f.is_empty() {
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            enc.clear_buffer(&self.scratch, offset, Some(size));
+            gpu.queue.submit([enc.finish()]);
+            return;
+        }
+        assert_eq!(control.body_f.len() as u64 * 32, size, "Control::body_f shape [world_count * body_count]");
+        let f: Vec<[f32; 4]> =
+            control.body_f.iter().flat_map(|w| [w[0].extend(0.0).to_array(), w[1].extend(0.0).to_array()]).collect();
+        gpu.queue.write_buffer(&self.scratch, offset, bytemuck::cast_slice(&f));
     }
 
     /// Records one solver step (after the contact pipeline's dispatches of the same frame).

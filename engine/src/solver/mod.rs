@@ -145,6 +145,45 @@ pub struct BodyState {
     pub body_qd: Vec<[Vec3; 2]>,
 }
 
+/// External wrenches on the bodies, held constant over a frame (the `Control` of the design: what a
+/// controller or a test pushes with). Kinematic and static bodies ignore it, as they ignore gravity.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Control {
+    /// Force through the centre of mass [N] and torque about it [N m], world frame,
+    /// shape [world_count * body_count]; empty for no external wrench.
+    pub body_f: Vec<[Vec3; 2]>,
+}
+
+impl Control {
+    /// No wrench on any of `world_count * body_count` bodies.
+    pub fn zeros(world_count: usize, body_count: usize) -> Self {
+        Control { body_f: vec![[Vec3::ZERO; 2]; world_count * body_count] }
+    }
+
+    /// Adds `force` [N] acting at `point` [m] (both world frame) on body `body` of world `world`: the
+    /// force plus its moment about the body's centre of mass at the state's pose.
+    pub fn add_force_at(
+        &mut self,
+        model: &BodyModel,
+        state: &BodyState,
+        world: usize,
+        body: usize,
+        force: Vec3,
+        point: Vec3,
+    ) {
+        let g = world * model.body_count() + body;
+        let (p, q) = xf(&state.body_q[g]);
+        let com = p + q * model.body_com[body];
+        self.body_f[g][0] += force;
+        self.body_f[g][1] += (point - com).cross(force);
+    }
+
+    /// The wrench on global body index `g` (zero where none is set).
+    fn wrench(&self, g: usize) -> [Vec3; 2] {
+        self.body_f.get(g).copied().unwrap_or([Vec3::ZERO; 2])
+    }
+}
+
 /// One contact prepared for the solver.
 #[derive(Clone, Copy, Debug)]
 struct Row {
@@ -187,14 +226,16 @@ fn xf(t: &TransformGpu) -> (Vec3, Quat) {
 
 /// Advances every world by one frame of `cfg.dt` with the contacts generated at the frame's start.
 /// `flat` is the contact model the contacts came from (its pairs give the bodies, shape poses, SDFs and
-/// friction coefficients; `NO_BODY` = the static world). Returns, per world, whether it stayed finite and below
-/// `max_speed` (a diverged world is left as is, for the caller to reset; other worlds are unaffected).
+/// friction coefficients; `NO_BODY` = the static world). `control` adds external wrenches (may be empty).
+/// Returns, per world, whether it stayed finite and below `max_speed` (a diverged world is left as is, for
+/// the caller to reset; other worlds are unaffected).
 pub fn step_cpu(
     model: &BodyModel,
     state: &mut BodyState,
     contacts: &ContactsHost,
     flat: &FlatModel,
     cfg: &SolverConfig,
+    control: &Control,
     warm: &mut WarmStart,
 ) -> Vec<bool> {
     let nb = model.body_count();
@@ -260,7 +301,9 @@ pub fn step_cpu(
         for _ in 0..cfg.substeps {
             for (i, v) in vel.iter_mut().enumerate().take(nb) {
                 if ctx.inv_m(i) > 0.0 {
-                    v[0] += model.gravity * h;
+                    let [f, tau] = control.wrench(base + i);
+                    v[0] += (model.gravity + ctx.inv_m(i) * f) * h;
+                    v[1] += ctx.inv_i_world(i, pos[i].1) * tau * h;
                 }
             }
             // Warm start: the previous substep's impulses (or the matched row's of last frame) along the
@@ -315,11 +358,12 @@ pub fn step_cpu_with_pipeline(
     model: &BodyModel,
     state: &mut BodyState,
     cfg: &SolverConfig,
+    control: &Control,
     warm: &mut WarmStart,
 ) -> Vec<bool> {
     contacts.write_body_q(gpu, &state.body_q);
     contacts.run(gpu);
-    step_cpu(model, state, &contacts.read(gpu), &contacts.flat, cfg, warm)
+    step_cpu(model, state, &contacts.read(gpu), &contacts.flat, cfg, control, warm)
 }
 
 /// What every row of one world's step reads: the contact model, the bodies, the settings and the substep.

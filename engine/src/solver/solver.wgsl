@@ -45,6 +45,17 @@ struct Row {
 
 // vec4s per row in solver_scratch.
 const ROW: u32 = 4u;
+
+// solver_scratch holds, in order: a status vec4 per world (x: 1 ok, 0 diverged; y: rows used), the external
+// wrench per body (Control::body_f: force xyz, then torque xyz; written by the host, read here), then each
+// world's rows. The wrench lives here because the stage already binds the 8 storage buffers WebGPU allows.
+fn control_index(g: u32) -> u32 {
+    return sp.world_count + 2u * g;
+}
+
+fn rows_base() -> u32 {
+    return sp.world_count * (1u + 2u * sp.body_count);
+}
 // Warm-start match: anchor and point within this fraction of the pair's contact offset, normals within
 // acos(WARM_COS) (see the row building in step).
 const WARM_DISTANCE: f32 = 0.1;
@@ -327,7 +338,7 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let h = sp.dt / f32(sp.substeps);
     // Rows from the reduced contacts: the query element's point in body a's frame at the frame's start.
-    let row0 = sp.world_count + world * sp.max_rows * ROW;
+    let row0 = rows_base() + world * sp.max_rows * ROW;
     var n_rows = 0u;
     for (var p = 0u; p < sp.pair_count; p++) {
         let pair = pairs[p];
@@ -349,9 +360,16 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     let first = world * sp.body_count;
     for (var sub = 0u; sub < sp.substeps; sub++) {
         for (var b = 0u; b < sp.body_count; b++) {
-            if (bodies[b].com_inv_mass.w > 0.0) {
+            let m = bodies[b];
+            if (m.com_inv_mass.w > 0.0) {
                 let g = first + b;
-                body_qd[2u * g] = vec4<f32>(body_qd[2u * g].xyz + sp.gravity.xyz * h, 0.0);
+                // External wrench (Control::body_f): force through the COM, torque about it, world frame.
+                let f = solver_scratch[control_index(g)].xyz;
+                let tau = solver_scratch[control_index(g) + 1u].xyz;
+                let r = quat_to_mat3(body_q[g].q);
+                let inv_i = r * m.inv_inertia * transpose(r);
+                body_qd[2u * g] = vec4<f32>(body_qd[2u * g].xyz + (sp.gravity.xyz + m.com_inv_mass.w * f) * h, 0.0);
+                body_qd[2u * g + 1u] = vec4<f32>(body_qd[2u * g + 1u].xyz + (inv_i * tau) * h, 0.0);
             }
         }
         sweep(world, row0, h, true, true, false);
