@@ -2,7 +2,8 @@
 // documents the method. Parameters in `sdf_values` from `base` (RevolvedSdf::to_words): the vertex count,
 // then (rho, z) per vertex. Uses Closest, seg_closest and signed_from_closest from thread.wgsl (concatenated
 // before). No loops: lavapipe charges every loop pass against one budget per invocation (see
-// contact/common.wgsl), and this is sampled many times per invocation, so the 15 segments are written out.
+// contact/common.wgsl), and this is sampled many times per invocation, so the 15 segments are written out,
+// then a ring profile's closing edge (first vertex off the axis: last -> first is part of the surface).
 
 struct RevolvedScan {
     best: Closest,
@@ -15,13 +16,8 @@ fn revolved_vertex(base: u32, i: u32) -> vec2<f32> {
     return vec2<f32>(bitcast<f32>(sdf_values[base + 1u + 2u * i]), bitcast<f32>(sdf_values[base + 2u + 2u * i]));
 }
 
-// Segment i - 1 -> i of the profile, if the profile has vertex i.
-fn revolved_segment(base: u32, n: u32, i: u32, x: vec2<f32>, scan: ptr<function, RevolvedScan>) {
-    if (i >= n) {
-        return;
-    }
-    let a = revolved_vertex(base, i - 1u);
-    let b = revolved_vertex(base, i);
+// One edge a -> b of the profile: nearest point so far, and the crossing count along +rho.
+fn revolved_edge(a: vec2<f32>, b: vec2<f32>, x: vec2<f32>, scan: ptr<function, RevolvedScan>) {
     let c = seg_closest(x, a, b);
     let d2 = dot(x - c.c, x - c.c);
     if (d2 < (*scan).best_d2) {
@@ -33,6 +29,14 @@ fn revolved_segment(base: u32, n: u32, i: u32, x: vec2<f32>, scan: ptr<function,
     if ((a.y > x.y) != (b.y > x.y) && x.x < a.x + (x.y - a.y) * (b.x - a.x) / (b.y - a.y)) {
         (*scan).inside = !(*scan).inside;
     }
+}
+
+// Segment i - 1 -> i of the profile, if the profile has vertex i.
+fn revolved_segment(base: u32, n: u32, i: u32, x: vec2<f32>, scan: ptr<function, RevolvedScan>) {
+    if (i >= n) {
+        return;
+    }
+    revolved_edge(revolved_vertex(base, i - 1u), revolved_vertex(base, i), x, scan);
 }
 
 fn revolved_sample(base: u32, p: vec3<f32>) -> Sample {
@@ -59,6 +63,10 @@ fn revolved_sample(base: u32, p: vec3<f32>) -> Sample {
     revolved_segment(base, n, 13u, x, &scan);
     revolved_segment(base, n, 14u, x, &scan);
     revolved_segment(base, n, 15u, x, &scan);
+    let first = revolved_vertex(base, 0u);
+    if (first.x > 0.0) {
+        revolved_edge(revolved_vertex(base, n - 1u), first, x, &scan);
+    }
     let s2 = signed_from_closest(x, scan.best, scan.inside, scan.normal);
     return Sample(s2.d, radial * s2.g.x + vec3<f32>(0.0, 0.0, 1.0) * s2.g.y);
 }
