@@ -4,6 +4,8 @@
 //! - [`nut_bolt`]: ISO metric hex nuts and bolts M4-M20 (ISO 68-1 profile, ISO 965-1 class 6H/6g at the
 //!   tight or loose end of the band, Factory's nut/head/shank dimensions), helical threads, assembled.
 //! - [`peg_hole`]: round pegs and holes 4-16 mm with Factory's (paper Table VII) diameters, assembled.
+//! - [`bowl`] and [`torus`]: the paper's pile-scene parts (section III-D, Table VI), solids of revolution with
+//!   an exact SDF ([`RevolvedPart::sdf`]) and a mesh that revolves the same profile.
 //! - [`Part`]: a closed, outward-wound [`TriMesh`](factory_engine::mesh::TriMesh) with mass properties and
 //!   its SDF resolution; [`Part::write`] writes `<name>.obj` and `<name>.urdf`.
 //!
@@ -26,6 +28,7 @@ mod geom;
 pub mod iso;
 pub mod part;
 pub mod peg_hole;
+pub mod pile;
 
 pub use error::{AssetError, Result};
 pub use fastener::{
@@ -35,3 +38,6 @@ pub use fastener::{
 pub use iso::{FastenerDims, Fit, Iso965Row, IsoSize, ThreadProfile, ThreadSpec, STEEL_DENSITY};
 pub use part::{Part, WrittenPart};
 pub use peg_hole::{peg_hole, PegHole, PegHoleOptions, PegSize, INSERTION_DENSITY};
+pub use pile::{
+    bowl, torus, BowlOptions, RevolvedPart, TorusOptions, ABS_DENSITY, BOWL_SDF_RESOLUTION, TORUS_SDF_RESOLUTION,
+};
