@@ -3,15 +3,24 @@
 //! ```text
 //! factory-assets nut-bolt --size M16 --fit tight --out DIR [--segments 192]
 //! factory-assets peg-hole --size 4 --fit tight --out DIR [--segments 128]
+//! factory-assets bowl --out DIR [--segments 40]
+//! factory-assets torus --out DIR [--segments 64]
 //! ```
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
-use factory_assets::{nut_bolt, peg_hole, Fit, IsoSize, Part, PegHoleOptions, PegSize, ThreadOptions};
+use factory_assets::{
+    bowl, nut_bolt, peg_hole, torus, BowlOptions, Fit, IsoSize, Part, PegHoleOptions, PegSize, ThreadOptions,
+    TorusOptions,
+};
 use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
-#[command(name = "factory-assets", version, about = "Procedural ISO nuts, bolts, pegs and holes as OBJ + URDF")]
+#[command(
+    name = "factory-assets",
+    version,
+    about = "Procedural ISO nuts, bolts, pegs and holes, bowls and toruses as OBJ + URDF"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -49,6 +58,24 @@ enum Command {
         #[arg(long, default_value_t = PegHoleOptions::default().segments)]
         segments: usize,
     },
+    /// Bowl of the bowls pile (100 mm, ABS; factory_assets::BowlOptions defaults).
+    Bowl {
+        /// Output directory (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+        /// Angular segments around the axis (8..=4096).
+        #[arg(long, default_value_t = BowlOptions::default().segments)]
+        segments: usize,
+    },
+    /// Torus of the toruses pile (48 mm, ABS; factory_assets::TorusOptions defaults).
+    Torus {
+        /// Output directory (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+        /// Angular segments around the axis (8..=4096).
+        #[arg(long, default_value_t = TorusOptions::default().segments)]
+        segments: usize,
+    },
 }
 
 fn parse<T: std::str::FromStr<Err = factory_assets::AssetError>>(s: &str) -> Result<T, String> {
@@ -82,6 +109,10 @@ fn main() -> anyhow::Result<()> {
             let ph = peg_hole(size, fit, &PegHoleOptions { segments, ..Default::default() })?;
             write(&ph.peg, &out)?;
             write(&ph.hole, &out)?;
+        }
+        Command::Bowl { out, segments } => write(&bowl(&BowlOptions { segments, ..Default::default() })?.part, &out)?,
+        Command::Torus { out, segments } => {
+            write(&torus(&TorusOptions { segments, ..Default::default() })?.part, &out)?
         }
     }
     Ok(())

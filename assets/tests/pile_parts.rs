@@ -251,3 +251,25 @@ fn parts_write_obj_and_urdf() {
     }
     std::fs::remove_dir_all(dir).ok();
 }
+
+#[test]
+fn cli_writes_a_bowl_and_a_torus() {
+    let dir = std::env::temp_dir().join(format!("factory-assets-pile-cli-{}", std::process::id()));
+    for (cmd, name) in [("bowl", "bowl_100mm"), ("torus", "torus_48mm")] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_factory-assets"))
+            .args([cmd, "--segments", "32", "--out"])
+            .arg(&dir)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(dir.join(format!("{name}.obj")).is_file() && dir.join(format!("{name}.urdf")).is_file());
+    }
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_factory-assets"))
+        .args(["torus", "--segments", "3", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("invalid segments = 3: 8 to 4096"));
+    std::fs::remove_dir_all(dir).ok();
+}
