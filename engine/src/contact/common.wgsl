@@ -65,6 +65,9 @@ struct Pair {
     _pad1: f32,
     _pad2: f32,
     _pad3: f32,
+    // Bounding spheres: the query shape's in its frame, the SDF shape's in its frame (w < 0: unbounded).
+    a_bound: vec4<f32>,
+    b_bound: vec4<f32>,
 }
 
 struct Transform {
@@ -97,6 +100,17 @@ fn xf_inv(a: Transform) -> Transform {
 
 fn xf_point(a: Transform, v: vec3<f32>) -> vec3<f32> {
     return a.p.xyz + quat_rotate(a.q, v);
+}
+
+// Broad phase: whether the pair's bounding spheres (shapes posed at world_a, world_b) are farther apart than
+// the contact offset, so that no query triangle can come within it (twin: generate.rs pair_far_cpu).
+fn pair_far(pair: Pair, world_a: Transform, world_b: Transform) -> bool {
+    if (pair.b_bound.w < 0.0) {
+        return false;
+    }
+    let d = xf_point(world_a, pair.a_bound.xyz) - xf_point(world_b, pair.b_bound.xyz);
+    let reach = pair.a_bound.w + pair.b_bound.w + pair.contact_offset;
+    return dot(d, d) > reach * reach;
 }
 
 // Order-preserving map of f32 to u32 (larger float -> larger integer), low bits cleared for an index.

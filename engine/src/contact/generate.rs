@@ -275,6 +275,19 @@ pub fn shape_world(body_q: &[Xf], body_count: u32, world: u32, body: u32, pos: [
     body_pose.mul(&Xf::from_arrays(pos, rot))
 }
 
+/// The broad phase (common.wgsl's `pair_far`): whether the pair's bounding spheres, the shapes posed at
+/// `world_a` and `world_b`, are farther apart than the contact offset (then no triangle can have a candidate).
+pub fn pair_far_cpu(pair: &PairGpu, world_a: &Xf, world_b: &Xf) -> bool {
+    if pair.b_bound[3] < 0.0 {
+        return false;
+    }
+    let ca = world_a.point(Vec3::from_slice(&pair.a_bound[..3]));
+    let cb = world_b.point(Vec3::from_slice(&pair.b_bound[..3]));
+    let d = ca - cb;
+    let reach = pair.a_bound[3] + pair.b_bound[3] + pair.contact_offset;
+    d.dot(d) > reach * reach
+}
+
 /// CPU twin of one generate workgroup: job `job` in world `world`.
 pub fn generate_job_cpu(
     flat: &FlatModel,
@@ -287,6 +300,9 @@ pub fn generate_job_cpu(
     let pair = &flat.pairs[job.pair as usize];
     let world_a = shape_world(body_q, body_count, world, pair.body_a, pair.a_pos, pair.a_rot);
     let world_b = shape_world(body_q, body_count, world, pair.body_b, pair.b_pos, pair.b_rot);
+    if pair_far_cpu(pair, &world_a, &world_b) {
+        return JobOutput { patches: Vec::new(), candidates: 0 };
+    }
     let b_from_a = world_b.inv().mul(&world_a);
     let mut red = Reducer::new(cfg.max_patches);
     let mut found = 0;

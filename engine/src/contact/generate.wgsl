@@ -122,6 +122,13 @@ fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wi
     }
     let world_a = xf_mul(body_a, Transform(pair.a_pos, pair.a_rot));
     let world_b = xf_mul(body_b, Transform(pair.b_pos, pair.b_rot));
+    // Broad phase: far apart, the job has nothing (uniform: every input is read at a uniform index).
+    if (pair_far(pair, world_a, world_b)) {
+        if (lid == 0u) {
+            job_patch_count[world * params.job_count + job_index] = 0u;
+        }
+        return;
+    }
     let b_from_a = xf_mul(xf_inv(world_b), world_a);
     let offset = pair.contact_offset;
     reset_patches(lid);

@@ -76,7 +76,7 @@ pub struct PairSpec {
     pub friction: f32,
 }
 
-/// GPU mirror of `Pair` in common.wgsl (160 bytes).
+/// GPU mirror of `Pair` in common.wgsl (192 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable, PartialEq)]
 pub struct PairGpu {
@@ -107,6 +107,50 @@ pub struct PairGpu {
     /// Coulomb friction coefficient (unitless).
     pub friction: f32,
     pub _pad: [f32; 3],
+    /// Bounding sphere of the query shape (its triangles plus `radius`): centre in the query shape's frame
+    /// xyz [m], radius w [m].
+    pub a_bound: [f32; 4],
+    /// Bounding sphere of the SDF shape's surface: centre in the SDF shape's frame xyz [m], radius w [m];
+    /// w < 0 for an unbounded shape (a plane, a thread). With both, the broad phase: a pair whose spheres are
+    /// farther apart than the contact offset has no candidate and is skipped (`pair_far`).
+    pub b_bound: [f32; 4],
+}
+
+/// w of an unbounded [`PairGpu::b_bound`].
+pub const UNBOUNDED: f32 = -1.0;
+
+/// Bounding sphere (centre xyz, radius w) of points: the centre of their box and the farthest point.
+fn bounding_sphere(points: impl Iterator<Item = Vec3> + Clone, pad: f32) -> [f32; 4] {
+    let (lo, hi) = points.clone().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    if !lo.is_finite() {
+        return [0.0, 0.0, 0.0, pad];
+    }
+    let c = 0.5 * (lo + hi);
+    let r = points.map(|v| v.distance(c)).fold(0.0f32, f32::max);
+    // One part in 1e5 of slack for the rounding of the world-frame test.
+    [c.x, c.y, c.z, (r + pad) * (1.0 + 1e-5)]
+}
+
+impl SdfShape {
+    /// Bounding sphere of the shape's surface in its frame (centre xyz, radius w [m]); w = [`UNBOUNDED`]
+    /// for the plane and the thread. A grid's is its whole box: the field outside is not sampled.
+    pub fn bound(&self) -> [f32; 4] {
+        match self {
+            SdfShape::Plane | SdfShape::Thread(_) => [0.0, 0.0, 0.0, UNBOUNDED],
+            SdfShape::Grid(g) => {
+                let hi = g.origin + (g.dims.as_vec3() - Vec3::ONE) * g.spacing;
+                bounding_sphere([g.origin, hi].into_iter(), 0.0)
+            }
+            SdfShape::Revolved(r) => {
+                // The profile's box revolved: a cylinder, whose bounding sphere is centred on the axis.
+                let rho = r.profile.iter().map(|v| v.x).fold(0.0f32, f32::max);
+                let (z0, z1) =
+                    r.profile.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| (a.min(v.y), b.max(v.y)));
+                let radius = rho.hypot(0.5 * (z1 - z0)) * (1.0 + 1e-5);
+                [0.0, 0.0, 0.5 * (z0 + z1), radius]
+            }
+        }
+    }
 }
 
 /// GPU mirror of `Job` in generate.wgsl: a run of query triangles of one pair.
@@ -293,6 +337,8 @@ impl ContactModel {
                 min_separation: 0.1 * mean_edge,
                 friction: p.friction,
                 _pad: [0.0; 3],
+                a_bound: bounding_sphere(p.query.triangles.iter().flatten().copied(), p.query.radius),
+                b_bound: p.sdf.bound(),
             });
         }
         if flat.tri_verts.is_empty() {
