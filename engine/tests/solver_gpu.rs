@@ -246,7 +246,7 @@ fn bad_settings_are_refused_naming_the_field() {
 }
 
 /// lavapipe cuts every loop short once an invocation has made 65535 loop passes: the solver refuses a
-/// step that could exceed that on a software adapter instead of silently truncating it.
+/// step that would exceed that on a software adapter even without contacts ...
 #[test]
 fn a_step_beyond_lavapipes_loop_budget_is_refused() {
     let g = gpu();
@@ -255,10 +255,42 @@ fn a_step_beyond_lavapipes_loop_budget_is_refused() {
     }
     let (contacts, bodies) = scene(0.5);
     let pipe = ContactPipeline::new(g, &contacts, 1, &ContactConfig::default()).unwrap();
-    let too_many = SolverConfig { substeps: 64, pos_iters: 20, ..Default::default() };
+    let too_many = SolverConfig { substeps: 64, pos_iters: 400, ..Default::default() };
     let e = GpuSolver::new(g, &pipe, &bodies, &too_many).err().expect("refused").to_string();
     assert!(e.contains("loop") && e.contains("substeps"), "{e}");
-    assert!(GpuSolver::new(g, &pipe, &bodies, &SolverConfig { substeps: 4, ..Default::default() }).is_ok());
+    assert!(GpuSolver::new(g, &pipe, &bodies, &SolverConfig { substeps: 64, ..Default::default() }).is_ok());
+}
+
+/// ... and a world whose contacts would take it past the budget in a frame is flagged and left as it was,
+/// not stepped with loops cut short; a world without contacts steps on, bitwise as when alone.
+#[test]
+fn a_world_whose_contacts_exceed_lavapipes_loop_budget_is_flagged_not_truncated() {
+    let g = gpu();
+    if !g.is_software() {
+        return;
+    }
+    let (contacts, bodies) = scene(0.5);
+    // 60 position sweeps x 1000 passes per patch: one resting box's patch needs ~62k passes; none, ~200.
+    let cfg = SolverConfig { pos_iters: 60, patch_iters: 1000, ..Default::default() };
+    let resting = TransformGpu::new(Vec3::new(0.0, 0.0, H.z), Quat::IDENTITY);
+    let falling = TransformGpu::new(Vec3::new(0.0, 0.0, 0.5), Quat::IDENTITY);
+    let state = BodyState { body_q: vec![resting, falling], body_qd: vec![[Vec3::ZERO; 2]; 2] };
+    let pipe = ContactPipeline::new(g, &contacts, 2, &ContactConfig::default()).unwrap();
+    let solver = GpuSolver::new(g, &pipe, &bodies, &cfg).unwrap();
+    solver.write_state(g, &pipe, &state);
+    solver.submit_frame(g, &pipe);
+    let (after, ok) = solver.read_state(g, &pipe);
+    assert_eq!(ok, vec![false, true]);
+    assert_eq!(solver.worlds_over_loop_budget(g), vec![true, false]);
+    assert_eq!(after.body_q[0], resting, "the flagged world moved");
+    // The falling world alone.
+    let alone_pipe = ContactPipeline::new(g, &contacts, 1, &ContactConfig::default()).unwrap();
+    let alone = GpuSolver::new(g, &alone_pipe, &bodies, &cfg).unwrap();
+    alone.write_state(g, &alone_pipe, &BodyState { body_q: vec![falling], body_qd: vec![[Vec3::ZERO; 2]] });
+    alone.submit_frame(g, &alone_pipe);
+    let (single, _) = alone.read_state(g, &alone_pipe);
+    assert_eq!(after.body_q[1], single.body_q[0]);
+    assert_eq!(after.body_qd[1], single.body_qd[0]);
 }
 
 /// A kinematic platform moves with its set velocity, carries a dynamic box, and is not slowed by it.

@@ -35,6 +35,9 @@ pub struct SolverParamsGpu {
     pub max_speed: f32,
     pub patch_iters: u32,
     pub gravity: [f32; 4],
+    /// Loop passes one invocation may make (0: unlimited; see [`GpuSolver::new`]).
+    pub loop_budget: u32,
+    pub _pad: [u32; 3],
 }
 
 /// GPU mirror of `Body` in solver.wgsl: inverse inertia columns (16-byte aligned), COM + inverse mass,
@@ -127,24 +130,26 @@ impl GpuSolver {
         let pair_count = contacts.flat.pairs.len() as u32;
         let max_rows = (pair_count * contacts.cfg.max_patches * 4).max(1);
         // llvmpipe (lavapipe) gives each invocation one budget of 65535 loop passes shared by all its loops
-        // and silently cuts every loop short beyond it (see ContactConfig::max_chunk_triangles); refuse a
-        // step that could exceed 7/8 of it there rather than return a truncated solve.
-        if gpu.is_software() {
-            // Loop passes (solver.wgsl): building visits every patch slot of every pair (with two 4-pass
-            // loops per slot for the warm-start match); each sweep and each warm start visits the pairs and
-            // their patches (four rows per pass); the body loops run twice per substep.
-            let (pairs, patches) = (pair_count as u64, contacts.cfg.max_patches as u64);
-            let per_sweep = pairs * (patches * cfg.patch_iters as u64 + 1) + 1;
-            let passes = pairs * (1 + patches * (1 + 4 + 4 * 5))
-                + 2 * model.body_count() as u64
-                + cfg.substeps as u64
-                    * ((cfg.pos_iters + cfg.vel_iters + 1) as u64 * per_sweep + 2 * model.body_count() as u64 + 2);
-            let budget = 65535 * 7 / 8;
-            if passes > budget {
+        // and silently cuts every loop short beyond it (see ContactConfig::max_chunk_triangles). The step
+        // counts its passes from the frame's real patch counts and, over 7/8 of the budget, flags the world
+        // instead of stepping it (`worlds_over_loop_budget`); refused here is only a step that could not be
+        // taken even without contacts. Loop passes (solver.wgsl): counting and building visit every pair,
+        // each sweep and each warm start visits the pairs, the body loops run twice per substep.
+        let loop_budget = if gpu.is_software() { crate::contact::LOOP_ITERATION_LIMIT / 8 * 7 } else { 0 };
+        if loop_budget > 0 {
+            let (pairs, bodies) = (pair_count as u64 + 1, model.body_count() as u64 + 1);
+            let sweeps = (cfg.pos_iters + cfg.vel_iters + 1) as u64;
+            let passes = 2 * pairs + cfg.substeps as u64 * (sweeps * (pairs + 2) + 2 * bodies + 1) + bodies + 1;
+            if passes > loop_budget as u64 {
                 return Err(EngineError::Config {
-                    field: "substeps x (pos_iters + vel_iters) x contacts",
-                    value: format!("{} x ({} + {}) x {max_rows} = {passes} loop passes", cfg.substeps, cfg.pos_iters, cfg.vel_iters),
-                    expected: format!("at most {budget} on a software adapter (llvmpipe's loop limit); use fewer substeps or iterations, or a smaller max_patches"),
+                    field: "substeps x (pos_iters + vel_iters) x pairs",
+                    value: format!(
+                        "{} x ({} + {}) x {pair_count} = {passes} loop passes before any contact",
+                        cfg.substeps, cfg.pos_iters, cfg.vel_iters
+                    ),
+                    expected: format!(
+                        "at most {loop_budget} on a software adapter (llvmpipe's loop limit); use fewer substeps, iterations or shape pairs per world"
+                    ),
                 });
             }
         }
@@ -162,6 +167,8 @@ impl GpuSolver {
             max_speed: cfg.max_speed,
             patch_iters: cfg.patch_iters,
             gravity: model.gravity.extend(0.0).to_array(),
+            loop_budget,
+            _pad: [0; 3],
         };
         let bodies: Vec<BodyGpu> = (0..model.body_count())
             .map(|i| {
@@ -284,6 +291,14 @@ impl GpuSolver {
         contacts.encode(&mut enc);
         self.encode(&mut enc);
         gpu.queue.submit([enc.finish()]);
+    }
+
+    /// Per world, whether its last step was skipped because its contacts would have taken more loop passes
+    /// than a software adapter allows (such a world is also flagged not ok by [`read_state`](Self::read_state)
+    /// and left as it was; fewer iterations, patches or pairs per world fit).
+    pub fn worlds_over_loop_budget(&self, gpu: &GpuContext) -> Vec<bool> {
+        let status: Vec<[f32; 4]> = gpu.read_buffer_prefix(&self.scratch, self.world_count as u64 * 16);
+        status.iter().map(|s| s[2] == 1.0).collect()
     }
 
     /// Reads poses, velocities and per-world status back (waits for the GPU).

@@ -21,6 +21,11 @@ struct SolverParams {
     max_speed: f32,
     patch_iters: u32,
     gravity: vec4<f32>,
+    // Loop passes one invocation may make (llvmpipe's budget, see GpuSolver::new); 0: unlimited.
+    loop_budget: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 struct Body {
@@ -34,8 +39,9 @@ struct Body {
 
 // A contact row: anchor (query element point in body a's frame) xyz + pair index (bits) w; accumulated
 // impulses of the current substep (normal, tangent 1, tangent 2) xyz and friction coefficient w; the normal
-// and separation of the last SDF sample (zero normal: none yet); the contact point in body b's frame at the frame's start
-// xyz (for matching the row next frame).
+// and separation of the last SDF sample (zero normal: none yet); the contact point in body b's frame at the
+// frame's start xyz (for matching the row next frame) and the frame it was built in w (u32 bits; rows of
+// patch slots unused since are older and never matched).
 struct Row {
     anchor: vec4<f32>,
     lambda: vec4<f32>,
@@ -253,7 +259,7 @@ fn row_index(row0: u32, p: u32, i: u32, k: u32) -> u32 {
 // and point on b within WARM_DISTANCE of the contact offset, normal within acos(WARM_COS)). The reduction
 // is deterministic, so resting contacts come back in the same patch, though not always in the same slot
 // (the deepest of four equally deep corners changes with rounding).
-fn build_patch_rows(row0: u32, p: u32, i: u32, pair: Pair, va: BodyView, vb: BodyView, pt: PatchOut) -> u32 {
+fn build_patch_rows(row0: u32, p: u32, i: u32, pair: Pair, va: BodyView, vb: BodyView, pt: PatchOut, frame: u32) -> u32 {
     let g0 = row_index(row0, p, i, 0u);
     var old_a: array<vec4<f32>, 4>;
     var old_l: array<vec4<f32>, 4>;
@@ -273,6 +279,7 @@ fn build_patch_rows(row0: u32, p: u32, i: u32, pair: Pair, va: BodyView, vb: Bod
         let c = pt.slots[k];
         if (c.w >= VALID_BELOW) {
             solver_scratch[rk] = vec4<f32>(0.0, 0.0, 0.0, bitcast<f32>(NONE));
+            solver_scratch[rk + 3u] = vec4<f32>(0.0, 0.0, 0.0, bitcast<f32>(frame));
             continue;
         }
         let local = quat_rotate(vec4<f32>(-va.rot.xyz, va.rot.w), c.xyz + pair.radius * pt.normal.xyz - va.pos);
@@ -282,7 +289,9 @@ fn build_patch_rows(row0: u32, p: u32, i: u32, pair: Pair, va: BodyView, vb: Bod
         var best = tol;
         var found = false;
         for (var j = 0u; j < 4u; j++) {
-            if (bitcast<u32>(old_a[j].w) == p && any(old_n[j].xyz != vec3<f32>(0.0)) && dot(old_n[j].xyz, pt.normal.xyz) >= WARM_COS) {
+            // Only last frame's rows (stamp frame - 1): a patch slot unused last frame holds older rows.
+            let last_frame = bitcast<u32>(old_b[j].w) + 1u == frame;
+            if (last_frame && bitcast<u32>(old_a[j].w) == p && any(old_n[j].xyz != vec3<f32>(0.0)) && dot(old_n[j].xyz, pt.normal.xyz) >= WARM_COS) {
                 let d = distance(old_a[j].xyz, local);
                 if (d <= tol && distance(old_b[j].xyz, pb) <= tol && (!found || d < best)) {
                     best = d;
@@ -295,7 +304,7 @@ fn build_patch_rows(row0: u32, p: u32, i: u32, pair: Pair, va: BodyView, vb: Bod
         solver_scratch[rk] = vec4<f32>(local, bitcast<f32>(p));
         solver_scratch[rk + 1u] = lambda;
         solver_scratch[rk + 2u] = normal;
-        solver_scratch[rk + 3u] = vec4<f32>(pb, 0.0);
+        solver_scratch[rk + 3u] = vec4<f32>(pb, bitcast<f32>(frame));
         built += 1u;
     }
     return built;
@@ -339,22 +348,37 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     let h = sp.dt / f32(sp.substeps);
     // Rows from the reduced contacts: the query element's point in body a's frame at the frame's start.
     let row0 = rows_base() + world * sp.max_rows * ROW;
+    // The loop passes this frame takes (each loop of n passes counted n + 1, as llvmpipe does): on a
+    // software adapter a world that would exceed the budget is flagged and left as it is, rather than have
+    // its loops silently cut short. Patches are few in a pile of many pairs, so the count uses the real ones.
+    var patches_used = 0u;
+    for (var p = 0u; p < sp.pair_count; p++) {
+        patches_used += patch_counts[world * sp.pair_count + p];
+    }
+    // (In f32: the product can pass 2^32 for absurd settings, and must then still exceed the budget.)
+    let pairs_f = f32(sp.pair_count + 1u);
+    let per_sweep = pairs_f + f32(patches_used) * f32(sp.patch_iters + 1u) + 2.0;
+    let sweeps = f32(sp.pos_iters + sp.vel_iters + 1u);
+    let per_substep = sweeps * per_sweep + 2.0 * f32(sp.body_count + 1u) + 1.0;
+    let passes = 2.0 * pairs_f + f32(patches_used) * 26.0 + f32(sp.substeps) * per_substep + f32(sp.body_count) + 2.0;
+    let frame = bitcast<u32>(solver_scratch[world].w) + 1u;
+    if (sp.loop_budget > 0u && passes > f32(sp.loop_budget)) {
+        // x: diverged/not stepped, z: 1 = over the loop budget; w: the frame counter stays.
+        solver_scratch[world] = vec4<f32>(0.0, 0.0, 1.0, solver_scratch[world].w);
+        return;
+    }
     var n_rows = 0u;
     for (var p = 0u; p < sp.pair_count; p++) {
+        let pw = world * sp.pair_count + p;
+        let count = patch_counts[pw];
+        if (count == 0u) {
+            continue;
+        }
         let pair = pairs[p];
         let va = view(world, pair.body_a);
         let vb = view(world, pair.body_b);
-        let pw = world * sp.pair_count + p;
-        let count = patch_counts[pw];
-        for (var i = 0u; i < MAX_PATCHES; i++) {
-            if (i < count) {
-                n_rows += build_patch_rows(row0, p, i, pair, va, vb, patches[pw * MAX_PATCHES + i]);
-            } else {
-                // Unused patches: no row there may be matched next frame.
-                for (var k = 0u; k < 4u; k++) {
-                    solver_scratch[row_index(row0, p, i, k)] = vec4<f32>(0.0, 0.0, 0.0, bitcast<f32>(NONE));
-                }
-            }
+        for (var i = 0u; i < count; i++) {
+            n_rows += build_patch_rows(row0, p, i, pair, va, vb, patches[pw * MAX_PATCHES + i], frame);
         }
     }
     let first = world * sp.body_count;
@@ -407,5 +431,5 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
             ok = 0.0;
         }
     }
-    solver_scratch[world] = vec4<f32>(ok, f32(n_rows), 0.0, 0.0);
+    solver_scratch[world] = vec4<f32>(ok, f32(n_rows), 0.0, bitcast<f32>(frame));
 }
