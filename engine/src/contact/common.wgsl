@@ -28,7 +28,8 @@ const IDX_MASK: u32 = 0x3ffu;
 // deepest contact and the surface.
 const DEPTH_BAND: f32 = 0.25;
 // ... and no more than the deepest contact's distance from the surface, or this [m] if that is less
-// (reduce.rs MIN_DEPTH_BAND: a peg standing on a table kept three slots on its chamfer's rim).
+// (reduce.rs MIN_DEPTH_BAND: a peg standing on a table kept three slots on its chamfer's rim). A patch whose
+// deepest contact is more than this above the surface is landing: no band (a tilted ring's far side).
 const MIN_DEPTH_BAND: f32 = 1.0e-4;
 
 struct Params {
@@ -171,7 +172,7 @@ fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32, band: f32
         return -depth;
     }
     let s0 = patch_slot[p * 4u];
-    if (depth > max(s0.w, 0.0) + min(band, max(abs(s0.w), MIN_DEPTH_BAND))) {
+    if (s0.w <= MIN_DEPTH_BAND && depth > max(s0.w, 0.0) + min(band, max(abs(s0.w), MIN_DEPTH_BAND))) {
         return NEG_INF;
     }
     if (k == 1u) {

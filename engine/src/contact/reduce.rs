@@ -21,6 +21,11 @@ pub const DEPTH_BAND: f32 = 0.25;
 /// (band 2.5 mm) got one contact on its bottom face and three on the chamfer's upper rim, 0.5 mm higher and
 /// wider apart, every frame; it stood on that single point and toppled. A falling or deeply penetrating
 /// patch still takes corners up to its deepest contact's distance above it (a tilted box landing).
+/// A patch whose deepest contact is still more than this above the surface is landing, not resting: its
+/// slots take any contact within the offset, so the side that swings down in the frame has one.
+/// Regression (2026-11-22): a ring landing tilted on the ground kept all four slots within 0.3 mm of its
+/// lowest point, and its far side slapped 8 mm into the ground in the next frame (4.4 mm with this rule,
+/// `factory-bench scene pile-toruses`).
 pub const MIN_DEPTH_BAND: f32 = 1e-4;
 const UNASSIGNED: u32 = u32::MAX - 1;
 const NONE: u32 = u32::MAX;
@@ -83,7 +88,7 @@ impl Reducer {
             return -depth;
         }
         let s0 = self.slots[p][0];
-        if depth > s0.w.max(0.0) + band.min(s0.w.abs().max(MIN_DEPTH_BAND)) {
+        if s0.w <= MIN_DEPTH_BAND && depth > s0.w.max(0.0) + band.min(s0.w.abs().max(MIN_DEPTH_BAND)) {
             return NEG_INF;
         }
         if k == 1 {
@@ -327,5 +332,24 @@ mod tests {
         assert_eq!(p.len(), 1);
         let depths: Vec<f32> = p[0].slots.iter().map(|s| s[3]).collect();
         assert_eq!(depths, vec![-0.002; 4], "{:?}", p[0].slots);
+    }
+
+    /// A landing patch (deepest contact 3 mm above the surface) spreads its slots over the whole bin: the
+    /// near corners and the far ones 21 mm higher alike, so the far side has a contact before it swings down.
+    #[test]
+    fn a_landing_patch_spreads_its_slots_over_the_whole_bin() {
+        let n = Vec4::new(0.0, 0.0, 1.0, 1.0);
+        let mut cands = Vec::new();
+        for (x, y) in [(-1.0, -1.0), (1.0, -1.0)] {
+            cands.push(Candidate { pd: Vec4::new(0.02 * x, 0.015 * y, 0.003, 0.003), n });
+            cands.push(Candidate { pd: Vec4::new(0.02 * x, 0.015 * -y, 0.024, 0.024), n });
+        }
+        let mut r = Reducer::new(16);
+        r.reduce_batch(&cands, 0.9, 0.03, 1e-3);
+        let p = r.patches(1.0);
+        assert_eq!(p.len(), 1);
+        let mut depths: Vec<f32> = p[0].slots.iter().map(|s| s[3]).collect();
+        depths.sort_by(f32::total_cmp);
+        assert_eq!(depths, vec![0.003, 0.003, 0.024, 0.024], "{:?}", p[0].slots);
     }
 }
