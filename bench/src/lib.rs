@@ -3,4 +3,5 @@
 
 pub mod contact_scene;
 pub mod pareto;
+pub mod pile;
 pub mod scene;

@@ -40,6 +40,12 @@ enum SdfKind {
 enum SceneName {
     /// M16 (or --size) nut released on its bolt, one pair per world.
     NutBolt,
+    /// --bodies M16 nuts dropped into a pile in each world.
+    PileNuts,
+    /// --bodies bowls dropped into a pile in each world.
+    PileBowls,
+    /// --bodies toruses dropped into a pile in each world.
+    PileToruses,
 }
 
 #[derive(Subcommand)]
@@ -57,24 +63,37 @@ enum Cmd {
         /// Frame time step [s].
         #[arg(long, default_value_t = 1.0 / 60.0)]
         dt: f32,
-        #[arg(long, default_value_t = 1)]
-        substeps: u32,
-        #[arg(long, default_value_t = 20)]
-        pos_iters: u32,
+        /// Substeps per frame [default: the scene's in the paper's Table II: 1; bowls 2].
+        #[arg(long)]
+        substeps: Option<u32>,
+        /// Position iterations [default: Table II's: nut-bolt 20, nuts and toruses 16, bowls 50].
+        #[arg(long)]
+        pos_iters: Option<u32>,
         #[arg(long, default_value_t = 1)]
         vel_iters: u32,
         /// Gauss-Seidel passes over each contact patch per sweep (SolverConfig::patch_iters).
         #[arg(long, default_value_t = factory_engine::solver::SolverConfig::default().patch_iters)]
         patch_iters: u32,
-        /// Bolt SDF: `analytic` or a grid resolution (e.g. 256).
+        /// Bolt SDF (nut-bolt): `analytic` or a grid resolution (e.g. 256).
         #[arg(long, default_value = "analytic")]
         sdf_res: String,
-        /// Patch budget per pair (16..=256).
-        #[arg(long, default_value_t = 64)]
-        patches: u32,
-        /// Friction coefficient (the paper's scene: 0.05).
-        #[arg(long, default_value_t = 0.05)]
-        mu: f32,
+        /// Patch budget per pair (16..=256) [default: nut-bolt 64, piles 16].
+        #[arg(long)]
+        patches: Option<u32>,
+        /// Friction coefficient [default: nut-bolt 0.05 as the paper; piles 0.5].
+        #[arg(long)]
+        mu: Option<f32>,
+        /// Bodies per world of a pile scene (the paper's: 1024, beyond this solver on lavapipe; see
+        /// docs/BENCHMARKS.md).
+        #[arg(long, default_value_t = 16)]
+        bodies: u32,
+        /// Seed of a pile's starting orientations.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Contact offset [mm]: contacts are generated this far apart, so it must cover a frame's approach
+        /// [default: nut-bolt 1; piles 10].
+        #[arg(long)]
+        offset_mm: Option<f32>,
         /// Projected-gradient iterations per query triangle.
         #[arg(long, default_value_t = 12)]
         descent_iters: u32,
@@ -212,6 +231,60 @@ enum Cmd {
 fn main() -> Result<()> {
     match Cli::parse().cmd {
         Cmd::Scene {
+            name: name @ (SceneName::PileNuts | SceneName::PileBowls | SceneName::PileToruses),
+            worlds,
+            seconds,
+            dt,
+            substeps,
+            pos_iters,
+            vel_iters,
+            patch_iters,
+            patches,
+            mu,
+            descent_iters,
+            bodies,
+            seed,
+            offset_mm,
+            json,
+            ..
+        } => {
+            use factory_bench::pile::{run_pile, PileKind, PileRun};
+            let kind = match name {
+                SceneName::PileNuts => PileKind::Nuts,
+                SceneName::PileBowls => PileKind::Bowls,
+                _ => PileKind::Toruses,
+            };
+            let paper = kind.paper_solver();
+            let run = PileRun {
+                kind,
+                bodies,
+                worlds,
+                seconds,
+                contact: ContactConfig {
+                    max_patches: patches.unwrap_or(16),
+                    iterations: descent_iters,
+                    ..Default::default()
+                },
+                solver: factory_engine::solver::SolverConfig {
+                    dt,
+                    substeps: substeps.unwrap_or(paper.substeps),
+                    pos_iters: pos_iters.unwrap_or(paper.pos_iters),
+                    vel_iters,
+                    patch_iters,
+                    ..Default::default()
+                },
+                mu: mu.unwrap_or(0.5),
+                contact_offset: offset_mm.unwrap_or(10.0) * 1e-3,
+                seed,
+            };
+            let report = run_pile(GpuContext::global()?, &run)?;
+            if json {
+                println!("{}", serde_json::to_string(&report)?);
+            } else {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            }
+        }
+        Cmd::Scene {
             name: SceneName::NutBolt,
             worlds,
             seconds,
@@ -227,8 +300,12 @@ fn main() -> Result<()> {
             segments_per_turn,
             size,
             fit,
+            offset_mm,
             json,
+            ..
         } => {
+            let (substeps, pos_iters, patches, mu) =
+                (substeps.unwrap_or(1), pos_iters.unwrap_or(20), patches.unwrap_or(64), mu.unwrap_or(0.05));
             let sdf_resolution = match sdf_res.as_str() {
                 "analytic" => None,
                 r => Some(r.parse::<u32>().map_err(|_| {
@@ -251,7 +328,7 @@ fn main() -> Result<()> {
                     ..Default::default()
                 },
                 mu,
-                contact_offset: 1e-3,
+                contact_offset: offset_mm.unwrap_or(1.0) * 1e-3,
                 segments_per_turn,
             };
             if !(mu.is_finite() && mu >= 0.0) {
@@ -263,6 +340,11 @@ fn main() -> Result<()> {
             } else {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             }
+        }
+        Cmd::Pareto {
+            scene: other @ (SceneName::PileNuts | SceneName::PileBowls | SceneName::PileToruses), ..
+        } => {
+            bail!("pareto --scene {other:?}: only nut-bolt is swept (valid: nut-bolt)")
         }
         Cmd::Pareto {
             scene: SceneName::NutBolt,
