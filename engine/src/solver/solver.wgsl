@@ -260,54 +260,70 @@ fn row_index(row0: u32, p: u32, i: u32, k: u32) -> u32 {
 // is deterministic, so resting contacts come back in the same patch, though not always in the same slot
 // (the deepest of four equally deep corners changes with rounding).
 fn build_patch_rows(row0: u32, p: u32, i: u32, pair: Pair, va: BodyView, vb: BodyView, pt: PatchOut, frame: u32) -> u32 {
+    // Written out, not looped: lavapipe counts every loop pass against the invocation's budget, and this
+    // runs for every patch of the world (ROW vec4s per row).
     let g0 = row_index(row0, p, i, 0u);
-    var old_a: array<vec4<f32>, 4>;
-    var old_l: array<vec4<f32>, 4>;
-    var old_n: array<vec4<f32>, 4>;
-    var old_b: array<vec4<f32>, 4>;
-    for (var j = 0u; j < 4u; j++) {
-        let rj = g0 + ROW * j;
-        old_a[j] = solver_scratch[rj];
-        old_l[j] = solver_scratch[rj + 1u];
-        old_n[j] = solver_scratch[rj + 2u];
-        old_b[j] = solver_scratch[rj + 3u];
-    }
-    let tol = WARM_DISTANCE * pair.contact_offset;
-    var built = 0u;
-    for (var k = 0u; k < 4u; k++) {
-        let rk = g0 + ROW * k;
-        let c = pt.slots[k];
-        if (c.w >= VALID_BELOW) {
-            solver_scratch[rk] = vec4<f32>(0.0, 0.0, 0.0, bitcast<f32>(NONE));
-            solver_scratch[rk + 3u] = vec4<f32>(0.0, 0.0, 0.0, bitcast<f32>(frame));
-            continue;
-        }
-        let local = quat_rotate(vec4<f32>(-va.rot.xyz, va.rot.w), c.xyz + pair.radius * pt.normal.xyz - va.pos);
-        let pb = quat_rotate(vec4<f32>(-vb.rot.xyz, vb.rot.w), c.xyz - vb.pos);
-        var lambda = vec4<f32>(0.0, 0.0, 0.0, pair.friction);
-        var normal = vec4<f32>(0.0);
-        var best = tol;
-        var found = false;
-        for (var j = 0u; j < 4u; j++) {
-            // Only last frame's rows (stamp frame - 1): a patch slot unused last frame holds older rows.
-            let last_frame = bitcast<u32>(old_b[j].w) + 1u == frame;
-            if (last_frame && bitcast<u32>(old_a[j].w) == p && any(old_n[j].xyz != vec3<f32>(0.0)) && dot(old_n[j].xyz, pt.normal.xyz) >= WARM_COS) {
-                let d = distance(old_a[j].xyz, local);
-                if (d <= tol && distance(old_b[j].xyz, pb) <= tol && (!found || d < best)) {
-                    best = d;
-                    found = true;
-                    lambda = vec4<f32>(old_l[j].xyz, pair.friction);
-                    normal = old_n[j];
-                }
-            }
-        }
-        solver_scratch[rk] = vec4<f32>(local, bitcast<f32>(p));
-        solver_scratch[rk + 1u] = lambda;
-        solver_scratch[rk + 2u] = normal;
-        solver_scratch[rk + 3u] = vec4<f32>(pb, bitcast<f32>(frame));
-        built += 1u;
-    }
+    let old = OldRows(
+        array<Row, 4>(old_row(g0), old_row(g0 + ROW), old_row(g0 + 2u * ROW), old_row(g0 + 3u * ROW)),
+    );
+    var built = build_row(g0, pt.slots[0], old, p, pair, va, vb, pt.normal.xyz, frame);
+    built += build_row(g0 + ROW, pt.slots[1], old, p, pair, va, vb, pt.normal.xyz, frame);
+    built += build_row(g0 + 2u * ROW, pt.slots[2], old, p, pair, va, vb, pt.normal.xyz, frame);
+    built += build_row(g0 + 3u * ROW, pt.slots[3], old, p, pair, va, vb, pt.normal.xyz, frame);
     return built;
+}
+
+// Last frame's rows of one patch, read before the patch's rows are rebuilt in place.
+struct OldRows {
+    rows: array<Row, 4>,
+}
+
+fn old_row(r: u32) -> Row {
+    return Row(solver_scratch[r], solver_scratch[r + 1u], solver_scratch[r + 2u], solver_scratch[r + 3u]);
+}
+
+// The warm-start match so far: the distance of the best old row, whether one matched, its impulses and
+// normal.
+struct Match {
+    best: f32,
+    found: bool,
+    lambda: vec4<f32>,
+    normal: vec4<f32>,
+}
+
+// Whether old row `o` was the same contact (see build_patch_rows), and the closer one of it and `m`.
+fn match_old(m: Match, o: Row, p: u32, n: vec3<f32>, local: vec3<f32>, pb: vec3<f32>, tol: f32, friction: f32, frame: u32) -> Match {
+    // Only last frame's rows (stamp frame - 1): a patch slot unused last frame holds older rows.
+    let last_frame = bitcast<u32>(o.point_b.w) + 1u == frame;
+    if (last_frame && bitcast<u32>(o.anchor.w) == p && any(o.normal.xyz != vec3<f32>(0.0)) && dot(o.normal.xyz, n) >= WARM_COS) {
+        let d = distance(o.anchor.xyz, local);
+        if (d <= tol && distance(o.point_b.xyz, pb) <= tol && (!m.found || d < m.best)) {
+            return Match(d, true, vec4<f32>(o.lambda.xyz, friction), o.normal);
+        }
+    }
+    return m;
+}
+
+// Builds the row at rk from patch slot c (empty: a NONE row); returns 1 if it is a contact.
+fn build_row(rk: u32, c: vec4<f32>, old: OldRows, p: u32, pair: Pair, va: BodyView, vb: BodyView, n: vec3<f32>, frame: u32) -> u32 {
+    if (c.w >= VALID_BELOW) {
+        solver_scratch[rk] = vec4<f32>(0.0, 0.0, 0.0, bitcast<f32>(NONE));
+        solver_scratch[rk + 3u] = vec4<f32>(0.0, 0.0, 0.0, bitcast<f32>(frame));
+        return 0u;
+    }
+    let local = quat_rotate(vec4<f32>(-va.rot.xyz, va.rot.w), c.xyz + pair.radius * n - va.pos);
+    let pb = quat_rotate(vec4<f32>(-vb.rot.xyz, vb.rot.w), c.xyz - vb.pos);
+    let tol = WARM_DISTANCE * pair.contact_offset;
+    var m = Match(tol, false, vec4<f32>(0.0, 0.0, 0.0, pair.friction), vec4<f32>(0.0));
+    m = match_old(m, old.rows[0], p, n, local, pb, tol, pair.friction, frame);
+    m = match_old(m, old.rows[1], p, n, local, pb, tol, pair.friction, frame);
+    m = match_old(m, old.rows[2], p, n, local, pb, tol, pair.friction, frame);
+    m = match_old(m, old.rows[3], p, n, local, pb, tol, pair.friction, frame);
+    solver_scratch[rk] = vec4<f32>(local, bitcast<f32>(p));
+    solver_scratch[rk + 1u] = m.lambda;
+    solver_scratch[rk + 2u] = m.normal;
+    solver_scratch[rk + 3u] = vec4<f32>(pb, bitcast<f32>(frame));
+    return 1u;
 }
 
 // One pass over the world's rows in order (pair, patch, slot), four rows (one patch) per loop pass
@@ -360,7 +376,7 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     let per_sweep = pairs_f + f32(patches_used) * f32(sp.patch_iters + 1u) + 2.0;
     let sweeps = f32(sp.pos_iters + sp.vel_iters + 1u);
     let per_substep = sweeps * per_sweep + 2.0 * f32(sp.body_count + 1u) + 1.0;
-    let passes = 2.0 * pairs_f + f32(patches_used) * 26.0 + f32(sp.substeps) * per_substep + f32(sp.body_count) + 2.0;
+    let passes = 2.0 * pairs_f + f32(patches_used) + f32(sp.substeps) * per_substep + f32(sp.body_count) + 2.0;
     let frame = bitcast<u32>(solver_scratch[world].w) + 1u;
     if (sp.loop_budget > 0u && passes > f32(sp.loop_budget)) {
         // x: diverged/not stepped, z: 1 = over the loop budget; w: the frame counter stays.
