@@ -228,6 +228,13 @@ enum Cmd {
     },
 }
 
+/// Prints a report as one JSON line (`--json`, for scripts) or indented.
+fn print_report(report: &impl serde::Serialize, json: bool) -> Result<()> {
+    let text = if json { serde_json::to_string(report)? } else { serde_json::to_string_pretty(report)? };
+    println!("{text}");
+    Ok(())
+}
+
 fn main() -> Result<()> {
     match Cli::parse().cmd {
         Cmd::Scene {
@@ -278,11 +285,7 @@ fn main() -> Result<()> {
                 seed,
             };
             let report = run_pile(GpuContext::global()?, &run)?;
-            if json {
-                println!("{}", serde_json::to_string(&report)?);
-            } else {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            }
+            print_report(&report, json)?;
         }
         Cmd::Scene {
             name: SceneName::NutBolt,
@@ -335,11 +338,7 @@ fn main() -> Result<()> {
                 bail!("--mu {mu}: the friction coefficient must be finite and >= 0");
             }
             let report = factory_bench::scene::run_nut_bolt(GpuContext::global()?, &run)?;
-            if json {
-                println!("{}", serde_json::to_string(&report)?);
-            } else {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            }
+            print_report(&report, json)?;
         }
         Cmd::Pareto {
             scene: other @ (SceneName::PileNuts | SceneName::PileBowls | SceneName::PileToruses), ..

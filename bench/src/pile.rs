@@ -25,6 +25,7 @@ use factory_engine::contact::{
 };
 use factory_engine::gpu::GpuContext;
 use factory_engine::mesh::{MassProperties, TriMesh};
+use factory_engine::rng::SplitMix64;
 use factory_engine::sdf::bake::BakeParams;
 use factory_engine::sdf::cache::SdfCache;
 use factory_engine::solver::gpu::GpuSolver;
@@ -80,25 +81,12 @@ pub struct PileScene {
     pub triangles: usize,
 }
 
-/// SplitMix64: a small seeded generator, so a pile is the same on every machine.
-struct Rng(u64);
-
-impl Rng {
-    fn unit(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// A uniformly random rotation (Shoemake 1992, "Uniform random rotations", Graphics Gems III).
-    fn rotation(&mut self) -> Quat {
-        let (u1, u2, u3) = (self.unit(), self.unit(), self.unit());
-        let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
-        let t = std::f32::consts::TAU;
-        Quat::from_xyzw(a * (t * u2).sin(), a * (t * u2).cos(), b * (t * u3).sin(), b * (t * u3).cos()).normalize()
-    }
+/// A uniformly random rotation (Shoemake 1992, "Uniform random rotations", Graphics Gems III).
+fn random_rotation(rng: &mut SplitMix64) -> Quat {
+    let (u1, u2, u3) = (rng.unit(), rng.unit(), rng.unit());
+    let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+    let t = std::f32::consts::TAU;
+    Quat::from_xyzw(a * (t * u2).sin(), a * (t * u2).cos(), b * (t * u3).sin(), b * (t * u3).cos()).normalize()
 }
 
 /// Builds a pile of `bodies` parts: every pair of parts and every part with the ground, friction `mu`,
@@ -156,7 +144,7 @@ pub fn pile_scene(kind: PileKind, bodies: u32, contact_offset: f32, mu: f32, see
     let reach = mesh.positions.iter().map(|v| v.distance(part.com)).fold(0.0f32, f32::max);
     let pitch = 2.0 * reach + LATTICE_GAP;
     let side = ((bodies as f32 / 4.0).sqrt().ceil() as u32).max(1);
-    let mut rng = Rng(seed);
+    let mut rng = SplitMix64(seed);
     let start = (0..bodies)
         .map(|i| {
             let (layer, cell) = (i / (side * side), i % (side * side));
@@ -166,7 +154,7 @@ pub fn pile_scene(kind: PileKind, bodies: u32, contact_offset: f32, mu: f32, see
                 0.0,
             ) * pitch
                 + Vec3::new(0.0, 0.0, reach + LATTICE_GAP + layer as f32 * pitch);
-            let q = rng.rotation();
+            let q = random_rotation(&mut rng);
             TransformGpu::new(com - q * part.com, q)
         })
         .collect();
@@ -306,9 +294,7 @@ pub fn run_pile(gpu: &GpuContext, run: &PileRun) -> Result<PileReport> {
         gpu.wait();
         wall += t.elapsed().as_secs_f64();
         let c = pipe.read(gpu);
-        if let Some(d) =
-            c.patches.iter().flat_map(|ps| ps.iter().flat_map(|p| p.contacts.iter().map(|c| c.depth))).reduce(f32::min)
-        {
+        if let Some(d) = crate::scene::min_depth_all(&c) {
             deepest = deepest.min(d);
         }
         let (s, ok) = solver.read_state(gpu, &pipe);
@@ -327,19 +313,7 @@ pub fn run_pile(gpu: &GpuContext, run: &PileRun) -> Result<PileReport> {
         .filter(|&i| c.patches[i].iter().any(|p| p.contacts.iter().any(|k| k.depth <= 0.5e-3)))
         .count() as u64;
     let pile_height = coms(&last)[..n].iter().map(|c| c.z).fold(0.0f32, f32::max);
-    let split = frames.min(10);
-    let time = |record: &dyn Fn(&mut factory_engine::wgpu::CommandEncoder)| {
-        let t = Instant::now();
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        for _ in 0..split {
-            record(&mut enc);
-        }
-        gpu.queue.submit([enc.finish()]);
-        gpu.wait();
-        t.elapsed().as_secs_f64() * 1e3 / split as f64
-    };
-    let handling_ms = time(&|enc| pipe.encode(enc));
-    let solve_ms = time(&|enc| solver.encode(enc));
+    let (handling_ms, solve_ms) = crate::scene::time_split(gpu, &pipe, &solver, frames.min(10));
     let sim = frames as f64 * run.solver.dt as f64;
     Ok(PileReport {
         scene: run.kind.scene_name(),

@@ -127,19 +127,7 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         yaw.update(&s.body_q[0]);
     }
     let (s, _) = solver.read_state(gpu, &pipe);
-    let split = frames.min(10);
-    let time = |record: &dyn Fn(&mut factory_engine::wgpu::CommandEncoder)| {
-        let t = Instant::now();
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        for _ in 0..split {
-            record(&mut enc);
-        }
-        gpu.queue.submit([enc.finish()]);
-        gpu.wait();
-        t.elapsed().as_secs_f64() * 1e3 / split as f64
-    };
-    let handling_ms = time(&|enc| pipe.encode(enc));
-    let solve_ms = time(&|enc| solver.encode(enc));
+    let (handling_ms, solve_ms) = time_split(gpu, &pipe, &solver, frames.min(10));
     let sim = frames as f64 * run.solver.dt as f64;
     let k = std::f64::consts::TAU / p as f64;
     let (m, i) = (mp.mass as f64, mp.inertia.z_axis.z as f64);
@@ -200,7 +188,23 @@ impl TurnCounter {
     }
 }
 
+/// Table I's split of a frame, timed on the current state: contact handling alone, then the solver step
+/// alone, each over `frames` frames recorded into one submission [ms per frame].
+pub fn time_split(gpu: &GpuContext, pipe: &ContactPipeline, solver: &GpuSolver, frames: u32) -> (f64, f64) {
+    let time = |record: &dyn Fn(&mut factory_engine::wgpu::CommandEncoder)| {
+        let t = Instant::now();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        for _ in 0..frames {
+            record(&mut enc);
+        }
+        gpu.queue.submit([enc.finish()]);
+        gpu.wait();
+        t.elapsed().as_secs_f64() * 1e3 / frames as f64
+    };
+    (time(&|enc| pipe.encode(enc)), time(&|enc| solver.encode(enc)))
+}
+
 /// Deepest contact over every pair and world.
-fn min_depth_all(c: &factory_engine::contact::ContactsHost) -> Option<f32> {
+pub fn min_depth_all(c: &factory_engine::contact::ContactsHost) -> Option<f32> {
     c.patches.iter().flat_map(|ps| ps.iter().flat_map(|p| p.contacts.iter().map(|c| c.depth))).reduce(f32::min)
 }

@@ -15,6 +15,7 @@ pub mod builder;
 pub mod contact;
 pub mod fsutil;
 pub mod gpu;
+pub mod rng;
 pub mod sdf;
 pub mod solver;
 pub mod urdf;

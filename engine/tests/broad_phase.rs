@@ -9,6 +9,7 @@ use factory_engine::contact::roles::{pair_spec, ShapeDesc, ShapeGeometry};
 use factory_engine::contact::{ContactConfig, ContactModel, ContactPipeline, TransformGpu};
 use factory_engine::gpu::GpuContext;
 use factory_engine::mesh::box_mesh;
+use factory_engine::rng::SplitMix64;
 use factory_engine::sdf::cache::SdfCache;
 use factory_engine::sdf::revolved::RevolvedSdf;
 use glam::{Quat, Vec3, Vec4};
@@ -16,22 +17,12 @@ use std::sync::Arc;
 
 const OFFSET: f32 = 0.004;
 
-/// A small deterministic generator (SplitMix64) for poses.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn unit(&mut self) -> Vec3 {
-        Vec3::new(self.next() - 0.5, self.next() - 0.5, self.next() - 0.5).normalize_or(Vec3::X)
-    }
-    fn rotation(&mut self) -> Quat {
-        Quat::from_axis_angle(self.unit(), 6.283 * self.next())
-    }
+fn unit_vector(rng: &mut SplitMix64) -> Vec3 {
+    Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5).normalize_or(Vec3::X)
+}
+
+fn rotation(rng: &mut SplitMix64) -> Quat {
+    Quat::from_axis_angle(unit_vector(rng), std::f32::consts::TAU * rng.unit())
 }
 
 /// Two bodies: a box mesh (queried) against (a) a baked grid of a tagged box and (b) an exact ring (a
@@ -77,13 +68,13 @@ fn skipped_pairs_have_no_candidate_within_the_offset_and_far_pairs_are_skipped()
     let dir = std::env::temp_dir().join(format!("factory-broad-phase-{}", std::process::id()));
     let cache = SdfCache::new(&dir);
     let flat = model(&cache).flatten(256).unwrap();
-    let mut rng = Rng(7);
+    let mut rng = SplitMix64(7);
     let (mut skipped, mut near_without_contact, mut with_contact) = ([0; 2], [0; 2], [0; 2]);
     for _ in 0..400 {
         // Body 1 at the origin, body 0 at 0..60 mm in a random direction, both randomly turned.
         let body_q = [
-            TransformGpu::new(rng.unit() * 0.06 * rng.next(), rng.rotation()),
-            TransformGpu::new(Vec3::ZERO, rng.rotation()),
+            TransformGpu::new(unit_vector(&mut rng) * 0.06 * rng.unit(), rotation(&mut rng)),
+            TransformGpu::new(Vec3::ZERO, rotation(&mut rng)),
         ];
         let xf: Vec<Xf> = body_q.iter().map(|t| t.xf()).collect();
         for p in 0..2 {
