@@ -343,7 +343,8 @@ fn main() -> Result<()> {
         Cmd::Pareto {
             scene: other @ (SceneName::PileNuts | SceneName::PileBowls | SceneName::PileToruses), ..
         } => {
-            bail!("pareto --scene {other:?}: only nut-bolt is swept (valid: nut-bolt)")
+            let name = other.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
+            bail!("pareto --scene {name}: only nut-bolt is swept (valid: nut-bolt)")
         }
         Cmd::Pareto {
             scene: SceneName::NutBolt,

@@ -266,7 +266,6 @@ pub fn run_pile(gpu: &GpuContext, run: &PileRun) -> Result<PileReport> {
         body_q: (0..run.worlds).flat_map(|_| scene.start.iter().copied()).collect(),
         body_qd: vec![[Vec3::ZERO; 2]; n * run.worlds as usize],
     };
-    solver.write_state(gpu, &pipe, &state);
     let e0 = total_energy(&scene, &state);
     let coms = |s: &BodyState| -> Vec<Vec3> {
         s.body_q.iter().map(|t| Vec3::from_slice(&t.p[..3]) + Quat::from_array(t.q) * scene.part.com).collect()
@@ -274,11 +273,7 @@ pub fn run_pile(gpu: &GpuContext, run: &PileRun) -> Result<PileReport> {
     let start_com = coms(&state);
     let top = start_com[..n].iter().map(|c| c.z).fold(0.0f32, f32::max) as f64;
     let released: f64 = start_com[..n].iter().map(|c| c.z as f64).sum::<f64>() * 9.81;
-    // Warm-up (not timed): lavapipe compiles the kernels at their first dispatch, for up to minutes on a
-    // cold shader cache; then the state is written again.
-    solver.submit_frame(gpu, &pipe);
-    gpu.wait();
-    solver.write_state(gpu, &pipe, &state);
+    crate::scene::warm_up(gpu, &pipe, &solver, &state);
     let frames = (run.seconds / run.solver.dt).round().max(1.0) as u32;
     let (mut wall, mut deepest, mut max_speed, mut max_energy) = (0.0f64, f32::INFINITY, 0.0f64, e0);
     let (mut finite, mut over) = (true, false);

@@ -108,7 +108,7 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         body_q: scene.poses(lift, &vec![0.0; run.worlds as usize]),
         body_qd: vec![[Vec3::ZERO; 2]; 2 * run.worlds as usize],
     };
-    solver.write_state(gpu, &pipe, &state);
+    warm_up(gpu, &pipe, &solver, &state);
     let frames = (run.seconds / run.solver.dt).round().max(1.0) as u32;
     let z0 = state.body_q[0].p[2];
     let (mut yaw, mut wall, mut deepest) = (TurnCounter::default(), 0.0f64, f32::INFINITY);
@@ -186,6 +186,15 @@ impl TurnCounter {
         self.radians += d;
         self.last = now;
     }
+}
+
+/// Writes `state`, runs one untimed frame and writes `state` again: lavapipe compiles the kernels at their
+/// first dispatch (for up to minutes on a cold shader cache), which must not count as a frame.
+pub fn warm_up(gpu: &GpuContext, pipe: &ContactPipeline, solver: &GpuSolver, state: &BodyState) {
+    solver.write_state(gpu, pipe, state);
+    solver.submit_frame(gpu, pipe);
+    gpu.wait();
+    solver.write_state(gpu, pipe, state);
 }
 
 /// Table I's split of a frame, timed on the current state: contact handling alone, then the solver step

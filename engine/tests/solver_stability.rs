@@ -423,3 +423,53 @@ fn a_1_mm_overlap_resolves_no_faster_than_the_max_depenetration_velocity() {
         }
     }
 }
+
+/// Coulomb friction against the analytic block on an incline (mu 0.5): at 20 deg (tan 0.36 < mu) a box set
+/// on the slope stays put; at 35 deg (tan 0.70 > mu) it slides down with a = g (sin t - mu cos t) =
+/// 1.61 m/s^2, so after 1 s its speed along the slope is a * 1 s (semi-implicit Euler is exact for the speed
+/// under a constant force). GPU solver and CPU reference, the paper's nut-bolt settings.
+#[test]
+fn a_box_on_an_incline_sticks_below_the_friction_angle_and_slides_at_g_sin_minus_mu_cos_above() {
+    /// Sticking: the box moves less than this along the slope in 1 s [m] ...
+    const STICK_DRIFT: f32 = 1e-5;
+    /// ... sliding: its speed is within this fraction of the analytic one.
+    const SLIDE_SPEED_TOL: f32 = 0.005;
+    let mu = 0.5;
+    let h = Vec3::new(0.02, 0.015, 0.01);
+    for (deg, slides) in [(20.0f32, false), (35.0, true)] {
+        let tilt = Quat::from_rotation_y(deg.to_radians());
+        let slope = ShapeDesc::fixed((Vec3::ZERO, tilt), ShapeGeometry::Plane);
+        let mut bodies = BodyModel { gravity: Vec3::new(0.0, 0.0, -G), ..Default::default() };
+        let b = add_box(&mut bodies, h);
+        let contacts = ContactModel { body_count: 1, pairs: vec![pair(&box_shape(b, h), &slope, OFFSET, mu)] };
+        // On the slope, its bottom face on the plane (0.1 um above it), at rest.
+        let start = BodyState {
+            body_q: vec![TransformGpu::new(tilt * Vec3::new(0.0, 0.0, h.z + 1e-7), tilt)],
+            body_qd: vec![[Vec3::ZERO; 2]],
+        };
+        // Down the slope: the plane's x axis tilted points down for a positive rotation about y.
+        let down = tilt * Vec3::X;
+        let down = if down.z < 0.0 { down } else { -down };
+        let t = deg.to_radians();
+        let a = G * (t.sin() - mu * t.cos());
+        for on_gpu in [true, false] {
+            let mut sim = Sim::new(&contacts, bodies.clone(), SolverConfig::default(), start.clone(), on_gpu);
+            for _ in 0..60 {
+                sim.step();
+            }
+            let moved = (p3(&sim.state.body_q[0]) - p3(&start.body_q[0])).dot(down);
+            let speed = sim.state.body_qd[0][0].dot(down);
+            eprintln!(
+                "{} at {deg} deg: moved {:.4e} m down the slope in 1 s, speed {speed:.4} m/s (analytic {:.4})",
+                sim.who(),
+                moved,
+                if slides { a } else { 0.0 }
+            );
+            if slides {
+                assert!((speed - a).abs() <= SLIDE_SPEED_TOL * a, "{}: {speed} m/s, analytic {a}", sim.who());
+            } else {
+                assert!(moved.abs() <= STICK_DRIFT, "{}: crept {moved} m", sim.who());
+            }
+        }
+    }
+}
