@@ -74,6 +74,9 @@ enum Cmd {
         /// Gauss-Seidel passes over each contact patch per sweep (SolverConfig::patch_iters).
         #[arg(long, default_value_t = factory_engine::solver::SolverConfig::default().patch_iters)]
         patch_iters: u32,
+        /// Coulomb friction per patch instead of per contact (SolverConfig::friction_per_patch).
+        #[arg(long)]
+        friction_per_patch: bool,
         /// Bolt SDF (nut-bolt): `analytic` or a grid resolution (e.g. 256).
         #[arg(long, default_value = "analytic")]
         sdf_res: String,
@@ -246,6 +249,7 @@ fn main() -> Result<()> {
             pos_iters,
             vel_iters,
             patch_iters,
+            friction_per_patch,
             patches,
             mu,
             descent_iters,
@@ -278,6 +282,7 @@ fn main() -> Result<()> {
                     pos_iters: pos_iters.unwrap_or(paper.pos_iters),
                     vel_iters,
                     patch_iters,
+                    friction_per_patch,
                     ..Default::default()
                 },
                 mu: mu.unwrap_or(0.5),
@@ -296,6 +301,7 @@ fn main() -> Result<()> {
             pos_iters,
             vel_iters,
             patch_iters,
+            friction_per_patch,
             sdf_res,
             patches,
             mu,
@@ -328,6 +334,7 @@ fn main() -> Result<()> {
                     pos_iters,
                     vel_iters,
                     patch_iters,
+                    friction_per_patch,
                     ..Default::default()
                 },
                 mu,

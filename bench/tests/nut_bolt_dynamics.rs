@@ -32,6 +32,10 @@ struct Run {
 }
 
 fn release_nut(mu: f32, frames: u32, on_gpu: bool, substeps: u32) -> Run {
+    release_nut_with(mu, frames, on_gpu, SolverConfig { substeps, ..Default::default() })
+}
+
+fn release_nut_with(mu: f32, frames: u32, on_gpu: bool, cfg: SolverConfig) -> Run {
     let nb = nut_bolt(IsoSize::M16, Fit::Tight, &ThreadOptions::default()).unwrap();
     let pair = PartPair::nut_bolt(&nb);
     let mut scene = ContactScene::with_thread_sdf(pair, nb.bolt_sdf(), 1.0e-3);
@@ -45,7 +49,6 @@ fn release_nut(mu: f32, frames: u32, on_gpu: bool, substeps: u32) -> Run {
     model.add_dynamic(mp.mass, mp.inertia, mp.com);
     model.add_static();
     let mut state = BodyState { body_q: scene.poses(lift, &[0.0]), body_qd: vec![[Vec3::ZERO; 2]; 2] };
-    let cfg = SolverConfig { substeps, ..Default::default() };
     let z0 = state.body_q[0].p[2];
     let mut excursion = 0.0f64;
     let mut yaw = TurnCounter::default();
@@ -111,7 +114,8 @@ const LOCKED_DRIFT: f64 = 0.01e-3;
 /// Held, the nut must stay within LOCKED_DRIFT at every frame, not only at 1 s. With the paper's 1 substep
 /// and 20 iterations the held nut jitters inside its 22 um axial play: by up to 18 um before warm starting,
 /// and still by 22 um with it (descent 0.011 mm in 1 s; 24 um with patch_iters 8; measured 2026-11-22: its
-/// ~200 contacts change slots from frame to frame, so few rows inherit impulses); 4 substeps converge
+/// ~200 contacts change slots from frame to frame, so few rows inherit impulses; 21.5 um with friction per
+/// patch, SolverConfig::friction_per_patch); 4 substeps converge
 /// (excursion 0.6 um), so this test runs at 4.
 const LOCK_SUBSTEPS: u32 = 4;
 

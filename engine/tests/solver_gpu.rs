@@ -66,11 +66,21 @@ fn frame(g: &GpuContext, pipe: &ContactPipeline, solver: &GpuSolver) {
 
 #[test]
 fn gpu_step_matches_the_cpu_reference() {
+    gpu_step_matches_the_cpu_reference_with(false);
+}
+
+/// The same with Coulomb friction per patch (SolverConfig::friction_per_patch).
+#[test]
+fn gpu_step_with_friction_per_patch_matches_the_cpu_reference() {
+    gpu_step_matches_the_cpu_reference_with(true);
+}
+
+fn gpu_step_matches_the_cpu_reference_with(friction_per_patch: bool) {
     let worlds = 8;
     let (contacts, bodies) = scene(0.4);
     let g = gpu();
     let pipe = ContactPipeline::new(g, &contacts, worlds, &ContactConfig::default()).unwrap();
-    let cfg = SolverConfig { substeps: 2, pos_iters: 8, vel_iters: 2, ..Default::default() };
+    let cfg = SolverConfig { substeps: 2, pos_iters: 8, vel_iters: 2, friction_per_patch, ..Default::default() };
     let solver = GpuSolver::new(g, &pipe, &bodies, &cfg).unwrap();
     let mut state = tumbling_state(worlds);
     let mut touched = 0;

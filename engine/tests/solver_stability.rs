@@ -427,7 +427,8 @@ fn a_1_mm_overlap_resolves_no_faster_than_the_max_depenetration_velocity() {
 /// Coulomb friction against the analytic block on an incline (mu 0.5): at 20 deg (tan 0.36 < mu) a box set
 /// on the slope stays put; at 35 deg (tan 0.70 > mu) it slides down with a = g (sin t - mu cos t) =
 /// 1.61 m/s^2, so after 1 s its speed along the slope is a * 1 s (semi-implicit Euler is exact for the speed
-/// under a constant force). GPU solver and CPU reference, the paper's nut-bolt settings.
+/// under a constant force). GPU solver and CPU reference, the paper's nut-bolt settings, friction per contact
+/// and per patch.
 #[test]
 fn a_box_on_an_incline_sticks_below_the_friction_angle_and_slides_at_g_sin_minus_mu_cos_above() {
     /// Sticking: the box moves less than this along the slope in 1 s [m] ...
@@ -452,15 +453,17 @@ fn a_box_on_an_incline_sticks_below_the_friction_angle_and_slides_at_g_sin_minus
         let down = if down.z < 0.0 { down } else { -down };
         let t = deg.to_radians();
         let a = G * (t.sin() - mu * t.cos());
-        for on_gpu in [true, false] {
-            let mut sim = Sim::new(&contacts, bodies.clone(), SolverConfig::default(), start.clone(), on_gpu);
+        for (on_gpu, friction_per_patch) in [(true, false), (false, false), (true, true), (false, true)] {
+            let cfg = SolverConfig { friction_per_patch, ..Default::default() };
+            let mut sim = Sim::new(&contacts, bodies.clone(), cfg, start.clone(), on_gpu);
             for _ in 0..60 {
                 sim.step();
             }
             let moved = (p3(&sim.state.body_q[0]) - p3(&start.body_q[0])).dot(down);
             let speed = sim.state.body_qd[0][0].dot(down);
+            let per = if friction_per_patch { "per patch" } else { "per contact" };
             eprintln!(
-                "{} at {deg} deg: moved {:.4e} m down the slope in 1 s, speed {speed:.4} m/s (analytic {:.4})",
+                "{} (friction {per}) at {deg} deg: moved {:.4e} m down the slope in 1 s, speed {speed:.4} m/s (analytic {:.4})",
                 sim.who(),
                 moved,
                 if slides { a } else { 0.0 }

@@ -37,7 +37,9 @@ pub struct SolverParamsGpu {
     pub gravity: [f32; 4],
     /// Loop passes one invocation may make (0: unlimited; see [`GpuSolver::new`]).
     pub loop_budget: u32,
-    pub _pad: [u32; 3],
+    /// 1: [`SolverConfig::friction_per_patch`].
+    pub friction_per_patch: u32,
+    pub _pad: [u32; 2],
 }
 
 /// GPU mirror of `Body` in solver.wgsl: inverse inertia columns (16-byte aligned), COM + inverse mass,
@@ -168,7 +170,8 @@ impl GpuSolver {
             patch_iters: cfg.patch_iters,
             gravity: model.gravity.extend(0.0).to_array(),
             loop_budget,
-            _pad: [0; 3],
+            friction_per_patch: cfg.friction_per_patch as u32,
+            _pad: [0; 2],
         };
         let bodies: Vec<BodyGpu> = (0..model.body_count())
             .map(|i| {

@@ -118,6 +118,11 @@ pub struct SolverConfig {
     /// sweep (no SDF samples): a cheap inner solve of the patch. Plain Gauss-Seidel (1) converges slowly
     /// where a patch's contacts act almost alike, as on the small base of a tall body (module doc).
     pub patch_iters: u32,
+    /// Coulomb friction per patch (the paper's III-B: "Coulomb friction per patch"): each contact may carry
+    /// tangential impulse up to mu times an equal share of its patch's total normal impulse, so the patch
+    /// as a whole obeys the cone and a contact that momentarily carries little load does not slip. Off:
+    /// per contact (each contact's own cone), the measured default of the tests.
+    pub friction_per_patch: bool,
 }
 
 impl Default for SolverConfig {
@@ -131,6 +136,7 @@ impl Default for SolverConfig {
             rest_offset: 0.0,
             max_speed: 100.0,
             patch_iters: 1,
+            friction_per_patch: false,
         }
     }
 }
@@ -431,16 +437,28 @@ struct Lever {
 fn solve_rows(ctx: &Step, rows: &mut [Row], pos: &[(Vec3, Quat)], vel: &mut [[Vec3; 2]], bias: bool, resample: bool) {
     for patch in rows.chunk_by_mut(|x, y| (x.pair, x.patch) == (y.pair, y.patch)) {
         for pass in 0..ctx.cfg.patch_iters {
-            for r in patch.iter_mut() {
-                solve_row(ctx, r, pos, vel, bias, resample && pass == 0);
+            for i in 0..patch.len() {
+                solve_row(ctx, patch, i, pos, vel, bias, resample && pass == 0);
             }
         }
     }
 }
 
-/// One Gauss-Seidel update of one row (solver.wgsl's `solve_row`).
-fn solve_row(ctx: &Step, r: &mut Row, pos: &[(Vec3, Quat)], vel: &mut [[Vec3; 2]], bias: bool, resample: bool) {
+/// One Gauss-Seidel update of row `i` of a patch's rows (solver.wgsl's `solve_row`).
+fn solve_row(
+    ctx: &Step,
+    patch: &mut [Row],
+    i: usize,
+    pos: &[(Vec3, Quat)],
+    vel: &mut [[Vec3; 2]],
+    bias: bool,
+    resample: bool,
+) {
+    // The patch's normal impulse per contact (solver.wgsl's patch_normal_share), summed in slot order.
+    let share = |patch: &[Row]| patch.iter().map(|r| r.lambda_n).sum::<f32>() / patch.len().max(1) as f32;
     let (cfg, h) = (ctx.cfg, ctx.h);
+    let pooled = cfg.friction_per_patch;
+    let r = &mut patch[i];
     let ((pa, qa), (pb, qb)) = (pos[r.a], pos[r.b]);
     let pair = &ctx.flat.pairs[r.pair];
     let x = pa + qa * r.anchor_a;
@@ -467,7 +485,8 @@ fn solve_row(ctx: &Step, r: &mut Row, pos: &[(Vec3, Quat)], vel: &mut [[Vec3; 2]
     };
     let l = ctx.lever(r, pos, n);
     let (Lever { ra, rb, ia, ib }, ma, mb) = (&l, ctx.inv_m(r.a), ctx.inv_m(r.b));
-    let rel = |vel: &[[Vec3; 2]]| (vel[r.a][0] + vel[r.a][1].cross(*ra)) - (vel[r.b][0] + vel[r.b][1].cross(*rb));
+    let (a, b) = (r.a, r.b);
+    let rel = |vel: &[[Vec3; 2]]| (vel[a][0] + vel[a][1].cross(*ra)) - (vel[b][0] + vel[b][1].cross(*rb));
     let eff = |d: Vec3| {
         let (ca, cb) = (ra.cross(d), rb.cross(d));
         ma + mb + ca.dot(*ia * ca) + cb.dot(*ib * cb)
@@ -489,10 +508,12 @@ fn solve_row(ctx: &Step, r: &mut Row, pos: &[(Vec3, Quat)], vel: &mut [[Vec3; 2]
     let d = new - r.lambda_n;
     r.lambda_n = new;
     ctx.apply(r, &l, vel, n * d);
-    if r.mu > 0.0 {
+    let mu = r.mu;
+    if mu > 0.0 {
         let t1 = n.any_orthonormal_vector();
         let t2 = n.cross(t1);
-        let limit = r.mu * r.lambda_n;
+        let limit = if pooled { mu * share(patch) } else { mu * patch[i].lambda_n };
+        let r = &mut patch[i];
         for (j, t) in [t1, t2].into_iter().enumerate() {
             let kt = eff(t);
             if kt <= 0.0 {

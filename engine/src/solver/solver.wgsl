@@ -23,7 +23,8 @@ struct SolverParams {
     gravity: vec4<f32>,
     // Loop passes one invocation may make (llvmpipe's budget, see GpuSolver::new); 0: unlimited.
     loop_budget: u32,
-    _pad0: u32,
+    // 1: Coulomb's cone on each patch's total normal impulse (SolverConfig::friction_per_patch).
+    friction_per_patch: u32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -163,7 +164,7 @@ fn friction_row(va: BodyView, vb: BodyView, ra: vec3<f32>, rb: vec3<f32>, t: vec
     return new_t;
 }
 
-fn solve_row(world: u32, ri: u32, h: f32, bias: bool, resample: bool) {
+fn solve_row(world: u32, g0: u32, ri: u32, h: f32, bias: bool, resample: bool) {
     let anchor = solver_scratch[ri];
     if (bitcast<u32>(anchor.w) == NONE) {
         return; // an empty slot of its patch
@@ -217,12 +218,32 @@ fn solve_row(world: u32, ri: u32, h: f32, bias: bool, resample: bool) {
     if (mu > 0.0) {
         let t1 = any_orthonormal(n);
         let t2 = cross(n, t1);
-        let limit = mu * lambda.x;
+        var limit = mu * lambda.x;
+        if (sp.friction_per_patch != 0u) {
+            limit = mu * patch_normal_share(g0, ri, lambda.x);
+        }
         // Written out (not a loop): lavapipe counts every loop pass against one budget per invocation.
         lambda.y = friction_row(va, vb, ra, rb, t1, lambda.y, limit);
         lambda.z = friction_row(va, vb, ra, rb, t2, lambda.z, limit);
     }
     solver_scratch[ri + 1u] = lambda;
+}
+
+// The patch's normal impulse per contact: its rows' impulses (row ri's own being `own`, not yet stored)
+// summed and divided by its contacts (friction per patch: each contact may carry an equal share of
+// mu times the patch's normal impulse, so the patch as a whole obeys Coulomb's cone). Written out: no loop.
+fn patch_normal_share(g0: u32, ri: u32, own: f32) -> f32 {
+    var sum = 0.0;
+    var n = 0.0;
+    let r0 = select(solver_scratch[g0 + 1u].x, own, ri == g0);
+    let r1 = select(solver_scratch[g0 + ROW + 1u].x, own, ri == g0 + ROW);
+    let r2 = select(solver_scratch[g0 + 2u * ROW + 1u].x, own, ri == g0 + 2u * ROW);
+    let r3 = select(solver_scratch[g0 + 3u * ROW + 1u].x, own, ri == g0 + 3u * ROW);
+    if (bitcast<u32>(solver_scratch[g0].w) != NONE) { sum += r0; n += 1.0; }
+    if (bitcast<u32>(solver_scratch[g0 + ROW].w) != NONE) { sum += r1; n += 1.0; }
+    if (bitcast<u32>(solver_scratch[g0 + 2u * ROW].w) != NONE) { sum += r2; n += 1.0; }
+    if (bitcast<u32>(solver_scratch[g0 + 3u * ROW].w) != NONE) { sum += r3; n += 1.0; }
+    return sum / max(n, 1.0);
 }
 
 // Warm start of one row at the start of a substep: re-applies the impulses of the previous substep (or of
@@ -339,16 +360,16 @@ fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool, resample: bool) 
                 warm_row(world, g0 + 2u * ROW);
                 warm_row(world, g0 + 3u * ROW);
             } else {
-                solve_row(world, g0, h, bias, resample);
-                solve_row(world, g0 + ROW, h, bias, resample);
-                solve_row(world, g0 + 2u * ROW, h, bias, resample);
-                solve_row(world, g0 + 3u * ROW, h, bias, resample);
+                solve_row(world, g0, g0, h, bias, resample);
+                solve_row(world, g0, g0 + ROW, h, bias, resample);
+                solve_row(world, g0, g0 + 2u * ROW, h, bias, resample);
+                solve_row(world, g0, g0 + 3u * ROW, h, bias, resample);
                 // Extra passes over this patch alone (SolverConfig::patch_iters), on the sampled geometry.
                 for (var inner = 1u; inner < sp.patch_iters; inner++) {
-                    solve_row(world, g0, h, bias, false);
-                    solve_row(world, g0 + ROW, h, bias, false);
-                    solve_row(world, g0 + 2u * ROW, h, bias, false);
-                    solve_row(world, g0 + 3u * ROW, h, bias, false);
+                    solve_row(world, g0, g0, h, bias, false);
+                    solve_row(world, g0, g0 + ROW, h, bias, false);
+                    solve_row(world, g0, g0 + 2u * ROW, h, bias, false);
+                    solve_row(world, g0, g0 + 3u * ROW, h, bias, false);
                 }
             }
         }
