@@ -36,7 +36,7 @@ enum SdfKind {
     Analytic,
 }
 
-#[derive(Clone, Copy, Debug, ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, ValueEnum)]
 enum SceneName {
     /// M16 (or --size) nut released on its bolt, one pair per world.
     NutBolt,
@@ -48,71 +48,89 @@ enum SceneName {
     PileToruses,
 }
 
+#[derive(clap::Args)]
+struct SceneArgs {
+    #[arg(value_enum)]
+    name: SceneName,
+    /// Parallel worlds.
+    #[arg(long, default_value_t = 1)]
+    worlds: u32,
+    /// Simulated time [s].
+    #[arg(long, default_value_t = 1.0)]
+    seconds: f32,
+    /// Frame time step [s].
+    #[arg(long, default_value_t = 1.0 / 60.0)]
+    dt: f32,
+    /// Substeps per frame [default: the scene's in the paper's Table II: 1; bowls 2].
+    #[arg(long)]
+    substeps: Option<u32>,
+    /// Position iterations [default: Table II's: nut-bolt 20, nuts and toruses 16, bowls 50].
+    #[arg(long)]
+    pos_iters: Option<u32>,
+    #[arg(long, default_value_t = 1)]
+    vel_iters: u32,
+    /// Gauss-Seidel passes over each contact patch per sweep (SolverConfig::patch_iters).
+    #[arg(long, default_value_t = factory_engine::solver::SolverConfig::default().patch_iters)]
+    patch_iters: u32,
+    /// Coulomb friction per patch instead of per contact (SolverConfig::friction_per_patch).
+    #[arg(long)]
+    friction_per_patch: bool,
+    /// Bolt SDF (nut-bolt): `analytic` or a grid resolution (e.g. 256).
+    #[arg(long, default_value = "analytic")]
+    sdf_res: String,
+    /// Patch budget per pair (16..=256) [default: nut-bolt 64, piles 16].
+    #[arg(long)]
+    patches: Option<u32>,
+    /// Friction coefficient [default: nut-bolt 0.05 as the paper; piles 0.5].
+    #[arg(long)]
+    mu: Option<f32>,
+    /// Bodies per world of a pile scene (the paper's: 1024, beyond this solver on lavapipe; see
+    /// docs/BENCHMARKS.md).
+    #[arg(long, default_value_t = 16)]
+    bodies: u32,
+    /// Seed of a pile's starting orientations.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Contact offset [mm]: contacts are generated this far apart, so it must cover a frame's approach
+    /// [default: nut-bolt 1; piles 10].
+    #[arg(long)]
+    offset_mm: Option<f32>,
+    /// Projected-gradient iterations per query triangle.
+    #[arg(long, default_value_t = 12)]
+    descent_iters: u32,
+    /// Thread columns per turn of the generated nut and bolt meshes (multiple of 12, >= 24).
+    #[arg(long, default_value_t = 192)]
+    segments_per_turn: usize,
+    /// ISO size (M4, M8, M12, M16, M20).
+    #[arg(long, default_value = "M16")]
+    size: String,
+    /// Tolerance end: tight or loose.
+    #[arg(long, default_value = "tight")]
+    fit: String,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+impl SceneArgs {
+    /// The solver settings, the scene's Table II defaults filling what was not given.
+    fn solver(&self, paper: &factory_engine::solver::SolverConfig) -> factory_engine::solver::SolverConfig {
+        factory_engine::solver::SolverConfig {
+            dt: self.dt,
+            substeps: self.substeps.unwrap_or(paper.substeps),
+            pos_iters: self.pos_iters.unwrap_or(paper.pos_iters),
+            vel_iters: self.vel_iters,
+            patch_iters: self.patch_iters,
+            friction_per_patch: self.friction_per_patch,
+            ..Default::default()
+        }
+    }
+}
+
 #[derive(Subcommand)]
 enum Cmd {
     /// Whole frames (contacts + solver on the GPU) of a paper scene (Table II) with its accuracy figures.
-    Scene {
-        #[arg(value_enum)]
-        name: SceneName,
-        /// Parallel worlds.
-        #[arg(long, default_value_t = 1)]
-        worlds: u32,
-        /// Simulated time [s].
-        #[arg(long, default_value_t = 1.0)]
-        seconds: f32,
-        /// Frame time step [s].
-        #[arg(long, default_value_t = 1.0 / 60.0)]
-        dt: f32,
-        /// Substeps per frame [default: the scene's in the paper's Table II: 1; bowls 2].
-        #[arg(long)]
-        substeps: Option<u32>,
-        /// Position iterations [default: Table II's: nut-bolt 20, nuts and toruses 16, bowls 50].
-        #[arg(long)]
-        pos_iters: Option<u32>,
-        #[arg(long, default_value_t = 1)]
-        vel_iters: u32,
-        /// Gauss-Seidel passes over each contact patch per sweep (SolverConfig::patch_iters).
-        #[arg(long, default_value_t = factory_engine::solver::SolverConfig::default().patch_iters)]
-        patch_iters: u32,
-        /// Coulomb friction per patch instead of per contact (SolverConfig::friction_per_patch).
-        #[arg(long)]
-        friction_per_patch: bool,
-        /// Bolt SDF (nut-bolt): `analytic` or a grid resolution (e.g. 256).
-        #[arg(long, default_value = "analytic")]
-        sdf_res: String,
-        /// Patch budget per pair (16..=256) [default: nut-bolt 64, piles 16].
-        #[arg(long)]
-        patches: Option<u32>,
-        /// Friction coefficient [default: nut-bolt 0.05 as the paper; piles 0.5].
-        #[arg(long)]
-        mu: Option<f32>,
-        /// Bodies per world of a pile scene (the paper's: 1024, beyond this solver on lavapipe; see
-        /// docs/BENCHMARKS.md).
-        #[arg(long, default_value_t = 16)]
-        bodies: u32,
-        /// Seed of a pile's starting orientations.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Contact offset [mm]: contacts are generated this far apart, so it must cover a frame's approach
-        /// [default: nut-bolt 1; piles 10].
-        #[arg(long)]
-        offset_mm: Option<f32>,
-        /// Projected-gradient iterations per query triangle.
-        #[arg(long, default_value_t = 12)]
-        descent_iters: u32,
-        /// Thread columns per turn of the generated nut and bolt meshes (multiple of 12, >= 24).
-        #[arg(long, default_value_t = 192)]
-        segments_per_turn: usize,
-        /// ISO size (M4, M8, M12, M16, M20).
-        #[arg(long, default_value = "M16")]
-        size: String,
-        /// Tolerance end: tight or loose.
-        #[arg(long, default_value = "tight")]
-        fit: String,
-        /// Print one JSON object.
-        #[arg(long)]
-        json: bool,
-    },
+    Scene(SceneArgs),
     /// Speed against error: sweeps the bolt SDF, patch budget, substeps and position iterations one at a
     /// time around the paper's baseline (frictionless nut, analytic descent as reference) and writes a
     /// CSV and an SVG plot with the Pareto front (docs/BENCHMARKS.md).
@@ -240,112 +258,60 @@ fn print_report(report: &impl serde::Serialize, json: bool) -> Result<()> {
 
 fn main() -> Result<()> {
     match Cli::parse().cmd {
-        Cmd::Scene {
-            name: name @ (SceneName::PileNuts | SceneName::PileBowls | SceneName::PileToruses),
-            worlds,
-            seconds,
-            dt,
-            substeps,
-            pos_iters,
-            vel_iters,
-            patch_iters,
-            friction_per_patch,
-            patches,
-            mu,
-            descent_iters,
-            bodies,
-            seed,
-            offset_mm,
-            json,
-            ..
-        } => {
+        Cmd::Scene(args) if args.name != SceneName::NutBolt => {
             use factory_bench::pile::{run_pile, PileKind, PileRun};
-            let kind = match name {
+            let kind = match args.name {
                 SceneName::PileNuts => PileKind::Nuts,
                 SceneName::PileBowls => PileKind::Bowls,
                 _ => PileKind::Toruses,
             };
-            let paper = kind.paper_solver();
             let run = PileRun {
                 kind,
-                bodies,
-                worlds,
-                seconds,
+                bodies: args.bodies,
+                worlds: args.worlds,
+                seconds: args.seconds,
                 contact: ContactConfig {
-                    max_patches: patches.unwrap_or(16),
-                    iterations: descent_iters,
+                    max_patches: args.patches.unwrap_or(16),
+                    iterations: args.descent_iters,
                     ..Default::default()
                 },
-                solver: factory_engine::solver::SolverConfig {
-                    dt,
-                    substeps: substeps.unwrap_or(paper.substeps),
-                    pos_iters: pos_iters.unwrap_or(paper.pos_iters),
-                    vel_iters,
-                    patch_iters,
-                    friction_per_patch,
-                    ..Default::default()
-                },
-                mu: mu.unwrap_or(0.5),
-                contact_offset: offset_mm.unwrap_or(10.0) * 1e-3,
-                seed,
+                solver: args.solver(&kind.paper_solver()),
+                mu: args.mu.unwrap_or(0.5),
+                contact_offset: args.offset_mm.unwrap_or(10.0) * 1e-3,
+                seed: args.seed,
             };
-            let report = run_pile(GpuContext::global()?, &run)?;
-            print_report(&report, json)?;
+            print_report(&run_pile(GpuContext::global()?, &run)?, args.json)?;
         }
-        Cmd::Scene {
-            name: SceneName::NutBolt,
-            worlds,
-            seconds,
-            dt,
-            substeps,
-            pos_iters,
-            vel_iters,
-            patch_iters,
-            friction_per_patch,
-            sdf_res,
-            patches,
-            mu,
-            descent_iters,
-            segments_per_turn,
-            size,
-            fit,
-            offset_mm,
-            json,
-            ..
-        } => {
-            let (substeps, pos_iters, patches, mu) =
-                (substeps.unwrap_or(1), pos_iters.unwrap_or(20), patches.unwrap_or(64), mu.unwrap_or(0.05));
-            let sdf_resolution = match sdf_res.as_str() {
+        Cmd::Scene(args) => {
+            // The paper's nut-bolt row of Table II: 1 substep, 20 position iterations; mu 0.05.
+            let paper = factory_engine::solver::SolverConfig { substeps: 1, pos_iters: 20, ..Default::default() };
+            let mu = args.mu.unwrap_or(0.05);
+            let sdf_resolution = match args.sdf_res.as_str() {
                 "analytic" => None,
                 r => Some(r.parse::<u32>().map_err(|_| {
                     anyhow::anyhow!("--sdf-res {r:?}: valid values are `analytic` or a grid resolution such as 256")
                 })?),
             };
             let run = factory_bench::scene::NutBoltRun {
-                size: size.parse().map_err(|e| anyhow::anyhow!("--size: {e}"))?,
-                fit: fit.parse().map_err(|e| anyhow::anyhow!("--fit: {e}"))?,
-                worlds,
-                seconds,
+                size: args.size.parse().map_err(|e| anyhow::anyhow!("--size: {e}"))?,
+                fit: args.fit.parse().map_err(|e| anyhow::anyhow!("--fit: {e}"))?,
+                worlds: args.worlds,
+                seconds: args.seconds,
                 sdf_resolution,
-                contact: ContactConfig { max_patches: patches, iterations: descent_iters, ..Default::default() },
-                solver: factory_engine::solver::SolverConfig {
-                    dt,
-                    substeps,
-                    pos_iters,
-                    vel_iters,
-                    patch_iters,
-                    friction_per_patch,
+                contact: ContactConfig {
+                    max_patches: args.patches.unwrap_or(64),
+                    iterations: args.descent_iters,
                     ..Default::default()
                 },
+                solver: args.solver(&paper),
                 mu,
-                contact_offset: offset_mm.unwrap_or(1.0) * 1e-3,
-                segments_per_turn,
+                contact_offset: args.offset_mm.unwrap_or(1.0) * 1e-3,
+                segments_per_turn: args.segments_per_turn,
             };
             if !(mu.is_finite() && mu >= 0.0) {
                 bail!("--mu {mu}: the friction coefficient must be finite and >= 0");
             }
-            let report = factory_bench::scene::run_nut_bolt(GpuContext::global()?, &run)?;
-            print_report(&report, json)?;
+            print_report(&factory_bench::scene::run_nut_bolt(GpuContext::global()?, &run)?, args.json)?;
         }
         Cmd::Pareto {
             scene: other @ (SceneName::PileNuts | SceneName::PileBowls | SceneName::PileToruses), ..

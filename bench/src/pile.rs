@@ -17,6 +17,7 @@
 //! sweeps must fit: a few dozen bodies per world. The paper's 1024-body piles need a solver that is
 //! parallel within a world (graph colouring) and a compacted list of near pairs; neither is built.
 
+use crate::scene::SolverColumns;
 use anyhow::{ensure, Context, Result};
 use factory_assets::pile::{bowl, torus, BowlOptions, TorusOptions};
 use factory_assets::{nut_bolt, Fit, IsoSize, ThreadOptions};
@@ -188,11 +189,9 @@ pub struct PileReport {
     pub query_triangles: usize,
     pub seconds: f32,
     pub frames: u32,
-    pub dt: f32,
-    pub substeps: u32,
-    pub pos_iters: u32,
-    pub vel_iters: u32,
-    pub patch_iters: u32,
+    /// The solver settings (Table II's columns).
+    #[serde(flatten)]
+    pub solver: SolverColumns,
     pub max_patches: u32,
     pub mu: f32,
     /// Last frame, summed over worlds: contact candidates before reduction, contacts after it, patches,
@@ -318,11 +317,7 @@ pub fn run_pile(gpu: &GpuContext, run: &PileRun) -> Result<PileReport> {
         query_triangles: scene.triangles,
         seconds: sim as f32,
         frames,
-        dt: run.solver.dt,
-        substeps: run.solver.substeps,
-        pos_iters: run.solver.pos_iters,
-        vel_iters: run.solver.vel_iters,
-        patch_iters: run.solver.patch_iters,
+        solver: (&run.solver).into(),
         max_patches: run.contact.max_patches,
         mu: run.mu,
         contacts_before: c.candidates.iter().map(|&k| k as u64).sum(),

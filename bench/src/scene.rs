@@ -42,11 +42,9 @@ pub struct NutBoltReport {
     pub worlds: u32,
     pub seconds: f32,
     pub frames: u32,
-    pub dt: f32,
-    pub substeps: u32,
-    pub pos_iters: u32,
-    pub vel_iters: u32,
-    pub patch_iters: u32,
+    /// The solver settings (Table II's columns).
+    #[serde(flatten)]
+    pub solver: SolverColumns,
     pub sdf: String,
     pub max_patches: u32,
     /// Projected-gradient iterations per query triangle.
@@ -138,11 +136,7 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         worlds: run.worlds,
         seconds: sim as f32,
         frames,
-        dt: run.solver.dt,
-        substeps: run.solver.substeps,
-        pos_iters: run.solver.pos_iters,
-        vel_iters: run.solver.vel_iters,
-        patch_iters: run.solver.patch_iters,
+        solver: (&run.solver).into(),
         sdf: run.sdf_resolution.map_or("analytic".into(), |r| format!("grid {r}")),
         max_patches: run.contact.max_patches,
         descent_iters: run.contact.iterations,
@@ -165,6 +159,31 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         finite,
         adapter: gpu.info.name.clone(),
     })
+}
+
+/// The solver settings of a scene report, as Table II gives them (flattened into the report's JSON).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SolverColumns {
+    /// Frame time step [s].
+    pub dt: f32,
+    pub substeps: u32,
+    pub pos_iters: u32,
+    pub vel_iters: u32,
+    pub patch_iters: u32,
+    pub friction_per_patch: bool,
+}
+
+impl From<&SolverConfig> for SolverColumns {
+    fn from(c: &SolverConfig) -> Self {
+        SolverColumns {
+            dt: c.dt,
+            substeps: c.substeps,
+            pos_iters: c.pos_iters,
+            vel_iters: c.vel_iters,
+            patch_iters: c.patch_iters,
+            friction_per_patch: c.friction_per_patch,
+        }
+    }
 }
 
 /// Accumulated rotation about z of a body sampled once per frame (less than half a turn per frame).
