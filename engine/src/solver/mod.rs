@@ -16,7 +16,8 @@
 //! planes, penetrate by ~0.4 mm and be pushed back). The normal velocity is driven to v_n >= -s/h when
 //! separated (speculative: approach at most the gap) or to v_n >= min(-s/h, max_depenetration_velocity)
 //! when penetrating.
-//! Friction: Coulomb per contact, the two tangential impulses clamped to mu times the normal impulse.
+//! Friction: Coulomb per contact, the two tangential impulses clamped to mu times the normal impulse (or,
+//! with `friction_per_patch`, to mu times the patch's normal impulse per contact).
 //! Accumulated impulses are clamped per substep (Catto 2005, "Iterative dynamics with temporal coherence").
 //!
 //! Warm starting: each substep starts by re-applying the previous substep's impulses, and each frame's
@@ -309,7 +310,10 @@ pub fn step_cpu(
                 if ctx.inv_m(i) > 0.0 {
                     let [f, tau] = control.wrench(base + i);
                     v[0] += (model.gravity + ctx.inv_m(i) * f) * h;
-                    v[1] += ctx.inv_i_world(i, pos[i].1) * tau * h;
+                    // The world inverse inertia only where a torque acts (solver.wgsl alike).
+                    if tau != Vec3::ZERO {
+                        v[1] += ctx.inv_i_world(i, pos[i].1) * tau * h;
+                    }
                 }
             }
             // Warm start: the previous substep's impulses (or the matched row's of last frame) along the

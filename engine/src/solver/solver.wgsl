@@ -76,7 +76,7 @@ const WARM_COS: f32 = 0.985;
 @group(1) @binding(1) var<storage, read> patch_counts: array<u32>;
 @group(2) @binding(0) var<storage, read_write> body_q: array<Transform>;
 @group(2) @binding(1) var<storage, read_write> body_qd: array<vec4<f32>>;  // [lin, ang] per body
-// [world_count] status (x: 1 ok, 0 diverged), then ROW * max_rows vec4 per world (Row).
+// Laid out as control_index and rows_base say: status per world, wrenches per body, ROW * max_rows per world.
 @group(2) @binding(2) var<storage, read_write> solver_scratch: array<vec4<f32>>;
 
 fn quat_to_mat3(q: vec4<f32>) -> mat3x3<f32> {
@@ -284,9 +284,7 @@ fn build_patch_rows(row0: u32, p: u32, i: u32, pair: Pair, va: BodyView, vb: Bod
     // Written out, not looped: lavapipe counts every loop pass against the invocation's budget, and this
     // runs for every patch of the world (ROW vec4s per row).
     let g0 = row_index(row0, p, i, 0u);
-    let old = OldRows(
-        array<Row, 4>(old_row(g0), old_row(g0 + ROW), old_row(g0 + 2u * ROW), old_row(g0 + 3u * ROW)),
-    );
+    let old = array<Row, 4>(old_row(g0), old_row(g0 + ROW), old_row(g0 + 2u * ROW), old_row(g0 + 3u * ROW));
     var built = build_row(g0, pt.slots[0], old, p, pair, va, vb, pt.normal.xyz, frame);
     built += build_row(g0 + ROW, pt.slots[1], old, p, pair, va, vb, pt.normal.xyz, frame);
     built += build_row(g0 + 2u * ROW, pt.slots[2], old, p, pair, va, vb, pt.normal.xyz, frame);
@@ -294,11 +292,7 @@ fn build_patch_rows(row0: u32, p: u32, i: u32, pair: Pair, va: BodyView, vb: Bod
     return built;
 }
 
-// Last frame's rows of one patch, read before the patch's rows are rebuilt in place.
-struct OldRows {
-    rows: array<Row, 4>,
-}
-
+// A row of last frame, read before its patch's rows are rebuilt in place.
 fn old_row(r: u32) -> Row {
     return Row(solver_scratch[r], solver_scratch[r + 1u], solver_scratch[r + 2u], solver_scratch[r + 3u]);
 }
@@ -326,7 +320,7 @@ fn match_old(m: Match, o: Row, p: u32, n: vec3<f32>, local: vec3<f32>, pb: vec3<
 }
 
 // Builds the row at rk from patch slot c (empty: a NONE row); returns 1 if it is a contact.
-fn build_row(rk: u32, c: vec4<f32>, old: OldRows, p: u32, pair: Pair, va: BodyView, vb: BodyView, n: vec3<f32>, frame: u32) -> u32 {
+fn build_row(rk: u32, c: vec4<f32>, old: array<Row, 4>, p: u32, pair: Pair, va: BodyView, vb: BodyView, n: vec3<f32>, frame: u32) -> u32 {
     if (c.w >= VALID_BELOW) {
         solver_scratch[rk] = vec4<f32>(0.0, 0.0, 0.0, bitcast<f32>(NONE));
         solver_scratch[rk + 3u] = vec4<f32>(0.0, 0.0, 0.0, bitcast<f32>(frame));
@@ -336,10 +330,10 @@ fn build_row(rk: u32, c: vec4<f32>, old: OldRows, p: u32, pair: Pair, va: BodyVi
     let pb = quat_rotate(vec4<f32>(-vb.rot.xyz, vb.rot.w), c.xyz - vb.pos);
     let tol = WARM_DISTANCE * pair.contact_offset;
     var m = Match(tol, false, vec4<f32>(0.0, 0.0, 0.0, pair.friction), vec4<f32>(0.0));
-    m = match_old(m, old.rows[0], p, n, local, pb, tol, pair.friction, frame);
-    m = match_old(m, old.rows[1], p, n, local, pb, tol, pair.friction, frame);
-    m = match_old(m, old.rows[2], p, n, local, pb, tol, pair.friction, frame);
-    m = match_old(m, old.rows[3], p, n, local, pb, tol, pair.friction, frame);
+    m = match_old(m, old[0], p, n, local, pb, tol, pair.friction, frame);
+    m = match_old(m, old[1], p, n, local, pb, tol, pair.friction, frame);
+    m = match_old(m, old[2], p, n, local, pb, tol, pair.friction, frame);
+    m = match_old(m, old[3], p, n, local, pb, tol, pair.friction, frame);
     solver_scratch[rk] = vec4<f32>(local, bitcast<f32>(p));
     solver_scratch[rk + 1u] = m.lambda;
     solver_scratch[rk + 2u] = m.normal;
@@ -427,10 +421,13 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // External wrench (Control::body_f): force through the COM, torque about it, world frame.
                 let f = solver_scratch[control_index(g)].xyz;
                 let tau = solver_scratch[control_index(g) + 1u].xyz;
-                let r = quat_to_mat3(body_q[g].q);
-                let inv_i = r * m.inv_inertia * transpose(r);
                 body_qd[2u * g] = vec4<f32>(body_qd[2u * g].xyz + (sp.gravity.xyz + m.com_inv_mass.w * f) * h, 0.0);
-                body_qd[2u * g + 1u] = vec4<f32>(body_qd[2u * g + 1u].xyz + (inv_i * tau) * h, 0.0);
+                // The world inverse inertia only where a torque acts (most bodies have none).
+                if (any(tau != vec3<f32>(0.0))) {
+                    let r = quat_to_mat3(body_q[g].q);
+                    let inv_i = r * m.inv_inertia * transpose(r);
+                    body_qd[2u * g + 1u] = vec4<f32>(body_qd[2u * g + 1u].xyz + (inv_i * tau) * h, 0.0);
+                }
             }
         }
         sweep(world, row0, h, true, true, false);
