@@ -71,7 +71,6 @@ impl PileKind {
 
 /// One pile world: the contact pairs, the bodies and their starting poses.
 pub struct PileScene {
-    pub kind: PileKind,
     pub contacts: ContactModel,
     pub bodies: BodyModel,
     /// Starting body poses of one world, shape [body_count].
@@ -159,7 +158,14 @@ pub fn pile_scene(kind: PileKind, bodies: u32, contact_offset: f32, mu: f32, see
             TransformGpu::new(com - q * part.com, q)
         })
         .collect();
-    Ok(PileScene { kind, contacts, bodies: model, start, part, triangles: mesh.triangle_count() })
+    Ok(PileScene { contacts, bodies: model, start, part, triangles: mesh.triangle_count() })
+}
+
+impl PileScene {
+    /// Gravity's magnitude [m/s^2] (down, -z).
+    pub fn g(&self) -> f64 {
+        -self.bodies.gravity.z as f64
+    }
 }
 
 /// Settings of one pile run.
@@ -239,7 +245,7 @@ pub struct PileReport {
 /// mass.
 pub fn total_energy(scene: &PileScene, s: &BodyState) -> f64 {
     let n = scene.bodies.body_count();
-    let (m, i_body) = (scene.part.mass as f64, scene.part.inertia);
+    let (m, i_body, g) = (scene.part.mass as f64, scene.part.inertia, scene.g());
     (0..n)
         .map(|b| {
             let t = s.body_q[b];
@@ -247,7 +253,7 @@ pub fn total_energy(scene: &PileScene, s: &BodyState) -> f64 {
             let com = Vec3::from_slice(&t.p[..3]) + q * scene.part.com;
             let [v, w] = s.body_qd[b];
             let w_body = q.inverse() * w;
-            0.5 * m * v.length_squared() as f64 + 0.5 * w_body.dot(i_body * w_body) as f64 + m * 9.81 * com.z as f64
+            0.5 * m * v.length_squared() as f64 + 0.5 * w_body.dot(i_body * w_body) as f64 + m * g * com.z as f64
         })
         .sum()
 }
@@ -271,7 +277,7 @@ pub fn run_pile(gpu: &GpuContext, run: &PileRun) -> Result<PileReport> {
     };
     let start_com = coms(&state);
     let top = start_com[..n].iter().map(|c| c.z).fold(0.0f32, f32::max) as f64;
-    let released: f64 = start_com[..n].iter().map(|c| c.z as f64).sum::<f64>() * 9.81;
+    let released: f64 = start_com[..n].iter().map(|c| c.z as f64).sum::<f64>() * scene.g();
     crate::scene::warm_up(gpu, &pipe, &solver, &state);
     let frames = (run.seconds / run.solver.dt).round().max(1.0) as u32;
     let (mut wall, mut deepest, mut max_speed, mut max_energy) = (0.0f64, f32::INFINITY, 0.0f64, e0);
@@ -333,7 +339,7 @@ pub fn run_pile(gpu: &GpuContext, run: &PileRun) -> Result<PileReport> {
         real_time_factor_per_world: sim / wall,
         body_seconds_per_wall_second: (run.bodies * run.worlds) as f64 * sim / wall,
         max_speed_m_s: max_speed,
-        free_fall_speed_m_s: (2.0 * 9.81 * top).sqrt(),
+        free_fall_speed_m_s: (2.0 * scene.g() * top).sqrt(),
         energy_bound_speed_m_s: (2.0 * released).sqrt(),
         max_energy_gain: max_energy / e0 - 1.0,
         last_second_max_drift_mm: coms(&last).iter().zip(&mark).map(|(a, b)| a.distance(*b)).fold(0.0f32, f32::max)
