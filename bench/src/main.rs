@@ -84,10 +84,13 @@ struct SceneArgs {
     /// Friction coefficient [default: nut-bolt 0.05 as the paper; piles 0.5].
     #[arg(long)]
     mu: Option<f32>,
-    /// Bodies per world of a pile scene (the paper's: 1024, beyond this solver on lavapipe; see
-    /// docs/BENCHMARKS.md).
+    /// Bodies per world of a pile scene (the paper's: 1024).
     #[arg(long, default_value_t = 16)]
     bodies: u32,
+    /// Pile solver: `coloured` (near pairs found every frame, graph-coloured Gauss-Seidel; any size) or
+    /// `serial` (all pairs fixed, one invocation per world; a few dozen bodies on lavapipe).
+    #[arg(long, value_enum, default_value = "coloured")]
+    pile_solver: PileSolverArg,
     /// Seed of a pile's starting orientations.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -110,6 +113,12 @@ struct SceneArgs {
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum PileSolverArg {
+    Coloured,
+    Serial,
 }
 
 impl SceneArgs {
@@ -279,6 +288,10 @@ fn main() -> Result<()> {
                 mu: args.mu.unwrap_or(0.5),
                 contact_offset: args.offset_mm.unwrap_or(10.0) * 1e-3,
                 seed: args.seed,
+                pile_solver: match args.pile_solver {
+                    PileSolverArg::Coloured => factory_bench::pile::PileSolver::Coloured,
+                    PileSolverArg::Serial => factory_bench::pile::PileSolver::Serial,
+                },
             };
             print_report(&run_pile(GpuContext::global()?, &run)?, args.json)?;
         }

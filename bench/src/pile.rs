@@ -12,10 +12,14 @@
 //! Every body also meets the ground (the half-space z <= 0). Which pairs are near is the broad phase's
 //! business (bounding spheres, `contact::generate::pair_far_cpu`), so far pairs cost a skipped workgroup.
 //!
-//! Limits, measured 2026-11-22 on lavapipe: the solver steps a world in one invocation (Gauss-Seidel is
-//! serial within a world), and lavapipe allows an invocation 65535 loop passes, so a world's pairs x
-//! sweeps must fit: a few dozen bodies per world. The paper's 1024-body piles need a solver that is
-//! parallel within a world (graph colouring) and a compacted list of near pairs; neither is built.
+//! Two solvers ([`PileSolver`]):
+//! - `coloured` (default): the many-body world of `factory_engine::crowd`: each frame the near pairs are
+//!   found on the GPU (bounding spheres), their contacts generated and reduced, and the Gauss-Seidel sweep
+//!   cut into one dispatch per colour of a graph colouring of the pairs: any number of bodies (the
+//!   paper's 1024).
+//! - `serial`: every pair of bodies in a fixed list, the broad phase skipping the far ones, and the world
+//!   stepped by one invocation (`GpuSolver`); lavapipe's 65535 loop passes per invocation limit this to a
+//!   few dozen bodies per world (measured 2026-11-22: 32 toruses fit).
 
 use crate::scene::SolverColumns;
 use anyhow::{ensure, Context, Result};
@@ -24,6 +28,8 @@ use factory_assets::{nut_bolt, Fit, IsoSize, ThreadOptions};
 use factory_engine::contact::{
     ContactConfig, ContactModel, ContactPipeline, PairSpec, QueryShape, SdfShape, TransformGpu, NO_BODY,
 };
+use factory_engine::crowd::gpu::CrowdPipeline;
+use factory_engine::crowd::{CrowdConfig, CrowdFlat, CrowdModel};
 use factory_engine::gpu::GpuContext;
 use factory_engine::mesh::{MassProperties, TriMesh};
 use factory_engine::rng::SplitMix64;
@@ -69,9 +75,20 @@ impl PileKind {
     }
 }
 
+/// Which solver steps a pile (see the module doc).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PileSolver {
+    /// Near pairs found every frame, graph-coloured Gauss-Seidel (`factory_engine::crowd`).
+    Coloured,
+    /// All pairs in a fixed list, one invocation per world (`GpuSolver`).
+    Serial,
+}
+
 /// One pile world: the contact pairs, the bodies and their starting poses.
 pub struct PileScene {
-    pub contacts: ContactModel,
+    /// Every body with every body and with the ground, as templates (the near pairs are found per frame).
+    pub crowd: CrowdModel,
     pub bodies: BodyModel,
     /// Starting body poses of one world, shape [body_count].
     pub start: Vec<TransformGpu>,
@@ -125,16 +142,7 @@ pub fn pile_scene(kind: PileKind, bodies: u32, contact_offset: f32, mu: f32, see
         contact_offset,
         friction: mu,
     };
-    let mut pairs = Vec::new();
-    for i in 0..bodies {
-        pairs.push(pair(i, NO_BODY, SdfShape::Plane));
-    }
-    for i in 0..bodies {
-        for j in i + 1..bodies {
-            pairs.push(pair(i, j, sdf.clone()));
-        }
-    }
-    let contacts = ContactModel { body_count: bodies, pairs };
+    let crowd = CrowdModel::uniform(bodies, pair(0, 1, sdf), vec![pair(0, NO_BODY, SdfShape::Plane)]);
     let mut model = BodyModel { gravity: Vec3::new(0.0, 0.0, -9.81), ..Default::default() };
     for _ in 0..bodies {
         model.add_dynamic(part.mass, part.inertia, part.com);
@@ -158,10 +166,24 @@ pub fn pile_scene(kind: PileKind, bodies: u32, contact_offset: f32, mu: f32, see
             TransformGpu::new(com - q * part.com, q)
         })
         .collect();
-    Ok(PileScene { contacts, bodies: model, start, part, triangles: mesh.triangle_count() })
+    Ok(PileScene { crowd, bodies: model, start, part, triangles: mesh.triangle_count() })
 }
 
 impl PileScene {
+    /// The fixed pair list of the serial solver: each body with the ground (pairs 0..n), then every pair
+    /// of bodies (i, j), i < j.
+    pub fn fixed_pairs(&self) -> ContactModel {
+        let n = self.crowd.body_count;
+        let with = |a: u32, b: u32, t: &PairSpec| PairSpec { body_a: a, body_b: b, ..t.clone() };
+        let mut pairs: Vec<PairSpec> = (0..n).map(|i| with(i, NO_BODY, &self.crowd.templates[1])).collect();
+        for i in 0..n {
+            for j in i + 1..n {
+                pairs.push(with(i, j, &self.crowd.templates[0]));
+            }
+        }
+        ContactModel { body_count: n, pairs }
+    }
+
     /// Gravity's magnitude [m/s^2] (down, -z).
     pub fn g(&self) -> f64 {
         -self.bodies.gravity.z as f64
@@ -182,6 +204,7 @@ pub struct PileRun {
     /// Contact offset [m].
     pub contact_offset: f32,
     pub seed: u64,
+    pub pile_solver: PileSolver,
 }
 
 /// What a pile run measured (the columns of the paper's Tables I and II, and the physical checks).
@@ -195,6 +218,11 @@ pub struct PileReport {
     pub query_triangles: usize,
     pub seconds: f32,
     pub frames: u32,
+    pub pile_solver: PileSolver,
+    /// Near pairs (bodies within reach of each other or of the ground) at the last frame, world 0 ...
+    pub near_pairs: u64,
+    /// ... and the most colours the coloured solver needed in any frame (0: serial solver).
+    pub colours: u32,
     /// The solver settings (Table II's columns).
     #[serde(flatten)]
     pub solver: SolverColumns,
@@ -236,7 +264,8 @@ pub struct PileReport {
     /// Deepest contact at any frame start [mm] (positive: penetration).
     pub max_penetration_mm: f64,
     pub finite: bool,
-    /// Worlds whose step did not fit lavapipe's loop budget (flagged, not stepped) in any frame.
+    /// Worlds whose step did not fit lavapipe's loop budget or (coloured solver) the near-pair, colour or
+    /// patch capacities (flagged, not stepped) in any frame.
     pub over_loop_budget: bool,
     pub adapter: String,
 }
@@ -264,91 +293,234 @@ pub fn run_pile(gpu: &GpuContext, run: &PileRun) -> Result<PileReport> {
     ensure!(run.seconds > 0.0 && run.seconds.is_finite(), "--seconds must be > 0, got {}", run.seconds);
     run.solver.validate()?;
     let scene = pile_scene(run.kind, run.bodies, run.contact_offset, run.mu, run.seed)?;
-    let pipe = ContactPipeline::new(gpu, &scene.contacts, run.worlds, &run.contact)?;
-    let solver = GpuSolver::new(gpu, &pipe, &scene.bodies, &run.solver)?;
-    let n = run.bodies as usize;
-    let state = BodyState {
-        body_q: (0..run.worlds).flat_map(|_| scene.start.iter().copied()).collect(),
-        body_qd: vec![[Vec3::ZERO; 2]; n * run.worlds as usize],
-    };
-    let e0 = total_energy(&scene, &state);
-    let coms = |s: &BodyState| -> Vec<Vec3> {
-        s.body_q.iter().map(|t| Vec3::from_slice(&t.p[..3]) + Quat::from_array(t.q) * scene.part.com).collect()
-    };
-    let start_com = coms(&state);
-    let top = start_com[..n].iter().map(|c| c.z).fold(0.0f32, f32::max) as f64;
-    let released: f64 = start_com[..n].iter().map(|c| c.z as f64).sum::<f64>() * scene.g();
-    crate::scene::warm_up(gpu, &pipe, &solver, &state);
-    let frames = (run.seconds / run.solver.dt).round().max(1.0) as u32;
-    let (mut wall, mut deepest, mut max_speed, mut max_energy) = (0.0f64, f32::INFINITY, 0.0f64, e0);
-    let (mut finite, mut over) = (true, false);
-    let mut last = state.clone();
-    let second_before_end = frames.saturating_sub((1.0 / run.solver.dt).round() as u32);
-    let mut mark = start_com.clone();
-    for f in 0..frames {
-        if f == second_before_end {
-            mark = coms(&last);
-        }
-        let t = Instant::now();
-        solver.submit_frame(gpu, &pipe);
-        gpu.wait();
-        wall += t.elapsed().as_secs_f64();
-        let c = pipe.read(gpu);
-        if let Some(d) = crate::scene::min_depth_all(&c) {
-            deepest = deepest.min(d);
-        }
-        let (s, ok) = solver.read_state(gpu, &pipe);
-        finite &= ok.iter().all(|&o| o);
-        over |= solver.worlds_over_loop_budget(gpu).iter().any(|&o| o);
-        max_speed = max_speed.max(s.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64);
-        max_energy = max_energy.max(total_energy(&scene, &s));
-        last = s;
+    match run.pile_solver {
+        PileSolver::Coloured => run_coloured(gpu, run, &scene),
+        PileSolver::Serial => run_serial(gpu, run, &scene),
     }
-    let c = pipe.read(gpu);
-    let contacts_after: u64 = c.patches.iter().flat_map(|ps| ps.iter().map(|p| p.contacts.len() as u64)).sum();
-    let patches: u64 = c.patches.iter().map(|ps| ps.len() as u64).sum();
-    let touching_pairs = c.patches.iter().filter(|ps| !ps.is_empty()).count() as u64;
-    let resting_body_pairs = (0..scene.contacts.pairs.len())
-        .filter(|&i| scene.contacts.pairs[i].body_b != NO_BODY)
-        .filter(|&i| c.patches[i].iter().any(|p| p.contacts.iter().any(|k| k.depth <= 0.5e-3)))
-        .count() as u64;
-    let pile_height = coms(&last)[..n].iter().map(|c| c.z).fold(0.0f32, f32::max);
-    let (handling_ms, solve_ms) = crate::scene::time_split(gpu, &pipe, &solver, frames.min(10));
-    let sim = frames as f64 * run.solver.dt as f64;
-    Ok(PileReport {
+}
+
+/// The figures both solvers report, gathered frame by frame.
+struct Tally {
+    n: usize,
+    e0: f64,
+    top: f64,
+    released: f64,
+    wall: f64,
+    deepest: f32,
+    max_speed: f64,
+    max_energy: f64,
+    finite: bool,
+    over: bool,
+    mark: Vec<Vec3>,
+    last: BodyState,
+    frames: u32,
+    second_before_end: u32,
+}
+
+impl Tally {
+    fn new(scene: &PileScene, run: &PileRun, state: &BodyState) -> Self {
+        let n = run.bodies as usize;
+        let start_com = coms(scene, state);
+        let e0 = total_energy(scene, state);
+        let frames = (run.seconds / run.solver.dt).round().max(1.0) as u32;
+        Tally {
+            n,
+            e0,
+            top: start_com[..n].iter().map(|c| c.z).fold(0.0f32, f32::max) as f64,
+            released: start_com[..n].iter().map(|c| c.z as f64).sum::<f64>() * scene.g(),
+            wall: 0.0,
+            deepest: f32::INFINITY,
+            max_speed: 0.0,
+            max_energy: e0,
+            finite: true,
+            over: false,
+            mark: start_com,
+            last: state.clone(),
+            frames,
+            second_before_end: frames.saturating_sub((1.0 / run.solver.dt).round() as u32),
+        }
+    }
+
+    /// Before frame f.
+    fn before(&mut self, scene: &PileScene, f: u32) {
+        if f == self.second_before_end {
+            self.mark = coms(scene, &self.last);
+        }
+    }
+
+    /// After a frame: its state, per-world flags, and the deepest contact it started from.
+    fn after(&mut self, scene: &PileScene, s: BodyState, ok: &[bool], deepest: Option<f32>) {
+        if let Some(d) = deepest {
+            self.deepest = self.deepest.min(d);
+        }
+        self.finite &= ok.iter().all(|&o| o);
+        self.max_speed = self.max_speed.max(s.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64);
+        self.max_energy = self.max_energy.max(total_energy(scene, &s));
+        self.last = s;
+    }
+}
+
+fn coms(scene: &PileScene, s: &BodyState) -> Vec<Vec3> {
+    s.body_q.iter().map(|t| Vec3::from_slice(&t.p[..3]) + Quat::from_array(t.q) * scene.part.com).collect()
+}
+
+/// Contact figures of the last frame (summed over worlds; resting pairs of world 0).
+struct LastContacts {
+    candidates: u64,
+    contacts: u64,
+    patches: u64,
+    touching: u64,
+    resting_body_pairs: u64,
+    near_pairs: u64,
+    colours: u32,
+}
+
+fn report(
+    scene: &PileScene,
+    run: &PileRun,
+    t: Tally,
+    c: LastContacts,
+    (handling_ms, solve_ms): (f64, f64),
+    gpu: &GpuContext,
+) -> PileReport {
+    let n = t.n;
+    let sim = t.frames as f64 * run.solver.dt as f64;
+    let pile_height = coms(scene, &t.last)[..n].iter().map(|c| c.z).fold(0.0f32, f32::max);
+    PileReport {
         scene: run.kind.scene_name(),
         bodies: run.bodies,
         worlds: run.worlds,
-        pairs: scene.contacts.pairs.len(),
+        pairs: n * (n - 1) / 2 + n,
         query_triangles: scene.triangles,
         seconds: sim as f32,
-        frames,
+        frames: t.frames,
+        pile_solver: run.pile_solver,
+        near_pairs: c.near_pairs,
+        colours: c.colours,
         solver: (&run.solver).into(),
         max_patches: run.contact.max_patches,
         mu: run.mu,
-        contacts_before: c.candidates.iter().map(|&k| k as u64).sum(),
-        contacts_after,
-        patches,
-        touching_pairs,
-        resting_body_pairs,
+        contacts_before: c.candidates,
+        contacts_after: c.contacts,
+        patches: c.patches,
+        touching_pairs: c.touching,
+        resting_body_pairs: c.resting_body_pairs,
         pile_height_mm: pile_height as f64 * 1e3,
-        wall_s: wall,
-        ms_per_frame: wall * 1e3 / frames as f64,
+        wall_s: t.wall,
+        ms_per_frame: t.wall * 1e3 / t.frames as f64,
         handling_ms_per_frame: handling_ms,
         solve_ms_per_frame: solve_ms,
-        real_time_factor_per_world: sim / wall,
-        body_seconds_per_wall_second: (run.bodies * run.worlds) as f64 * sim / wall,
-        max_speed_m_s: max_speed,
-        free_fall_speed_m_s: (2.0 * scene.g() * top).sqrt(),
-        energy_bound_speed_m_s: (2.0 * released).sqrt(),
-        max_energy_gain: max_energy / e0 - 1.0,
-        last_second_max_drift_mm: coms(&last).iter().zip(&mark).map(|(a, b)| a.distance(*b)).fold(0.0f32, f32::max)
-            as f64
+        real_time_factor_per_world: sim / t.wall,
+        body_seconds_per_wall_second: (run.bodies * run.worlds) as f64 * sim / t.wall,
+        max_speed_m_s: t.max_speed,
+        free_fall_speed_m_s: (2.0 * scene.g() * t.top).sqrt(),
+        energy_bound_speed_m_s: (2.0 * t.released).sqrt(),
+        max_energy_gain: t.max_energy / t.e0 - 1.0,
+        last_second_max_drift_mm: coms(scene, &t.last)
+            .iter()
+            .zip(&t.mark)
+            .map(|(a, b)| a.distance(*b))
+            .fold(0.0f32, f32::max) as f64
             * 1e3,
-        final_max_speed_m_s: last.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64,
-        max_penetration_mm: (-deepest as f64 * 1e3).max(0.0),
-        finite,
-        over_loop_budget: over,
+        final_max_speed_m_s: t.last.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64,
+        max_penetration_mm: (-t.deepest as f64 * 1e3).max(0.0),
+        finite: t.finite,
+        over_loop_budget: t.over,
         adapter: gpu.info.name.clone(),
-    })
+    }
+}
+
+fn start_state(scene: &PileScene, run: &PileRun) -> BodyState {
+    BodyState {
+        body_q: (0..run.worlds).flat_map(|_| scene.start.iter().copied()).collect(),
+        body_qd: vec![[Vec3::ZERO; 2]; run.bodies as usize * run.worlds as usize],
+    }
+}
+
+/// The coloured solver (`factory_engine::crowd`).
+fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<PileReport> {
+    let cfg = CrowdConfig::for_bodies(run.bodies);
+    let pipe = CrowdPipeline::new(gpu, &scene.crowd, &scene.bodies, run.worlds, &cfg, &run.contact, &run.solver)?;
+    let state = start_state(scene, run);
+    let mut t = Tally::new(scene, run, &state);
+    // An untimed frame first: lavapipe compiles the shaders at their first dispatch.
+    pipe.write_state(gpu, &state);
+    pipe.submit_frame(gpu);
+    gpu.wait();
+    pipe.write_state(gpu, &state);
+    let mut colours = 0;
+    for f in 0..t.frames {
+        t.before(scene, f);
+        let clock = Instant::now();
+        pipe.submit_frame(gpu);
+        gpu.wait();
+        t.wall += clock.elapsed().as_secs_f64();
+        let deepest = pipe
+            .read_patches(gpu)
+            .iter()
+            .flat_map(|w| w.iter().flat_map(|(_, ps)| ps.iter().flat_map(|p| p.contacts.iter().map(|c| c.depth))))
+            .reduce(f32::min);
+        let frames = pipe.read_frames(gpu);
+        t.over |= frames.iter().any(|f| f.flags != 0);
+        colours = colours.max(frames.iter().map(|f| f.colour_count).max().unwrap_or(0));
+        let (s, ok) = pipe.read_state(gpu);
+        t.after(scene, s, &ok, deepest);
+    }
+    let stats = pipe.read_stats(gpu);
+    let world0 = &pipe.read_patches(gpu)[0];
+    let c = LastContacts {
+        candidates: stats.iter().map(|s| s.candidates).sum(),
+        contacts: stats.iter().map(|s| s.contacts as u64).sum(),
+        patches: stats.iter().map(|s| s.patches as u64).sum(),
+        touching: stats.iter().map(|s| s.touching_pairs as u64).sum(),
+        resting_body_pairs: world0
+            .iter()
+            .filter(|(np, ps)| np.b != NO_BODY && ps.iter().any(|p| p.contacts.iter().any(|k| k.depth <= 0.5e-3)))
+            .count() as u64,
+        near_pairs: stats[0].pairs as u64,
+        colours,
+    };
+    let split = crate::scene::time_parts(gpu, t.frames.min(10), &|enc| pipe.encode_handling(enc), &|enc| {
+        pipe.encode_solve(enc)
+    });
+    Ok(report(scene, run, t, c, split, gpu))
+}
+
+/// The serial solver: all pairs fixed, one invocation per world.
+fn run_serial(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<PileReport> {
+    let fixed = scene.fixed_pairs();
+    let pipe = ContactPipeline::new(gpu, &fixed, run.worlds, &run.contact)?;
+    let solver = GpuSolver::new(gpu, &pipe, &scene.bodies, &run.solver)?;
+    let state = start_state(scene, run);
+    let mut t = Tally::new(scene, run, &state);
+    crate::scene::warm_up(gpu, &pipe, &solver, &state);
+    for f in 0..t.frames {
+        t.before(scene, f);
+        let clock = Instant::now();
+        solver.submit_frame(gpu, &pipe);
+        gpu.wait();
+        t.wall += clock.elapsed().as_secs_f64();
+        let deepest = crate::scene::min_depth_all(&pipe.read(gpu));
+        let (s, ok) = solver.read_state(gpu, &pipe);
+        t.over |= solver.worlds_over_loop_budget(gpu).iter().any(|&o| o);
+        t.after(scene, s, &ok, deepest);
+    }
+    let c = pipe.read(gpu);
+    let last = LastContacts {
+        candidates: c.candidates.iter().map(|&k| k as u64).sum(),
+        contacts: c.patches.iter().flat_map(|ps| ps.iter().map(|p| p.contacts.len() as u64)).sum(),
+        patches: c.patches.iter().map(|ps| ps.len() as u64).sum(),
+        touching: c.patches.iter().filter(|ps| !ps.is_empty()).count() as u64,
+        resting_body_pairs: (0..fixed.pairs.len())
+            .filter(|&i| fixed.pairs[i].body_b != NO_BODY)
+            .filter(|&i| c.patches[i].iter().any(|p| p.contacts.iter().any(|k| k.depth <= 0.5e-3)))
+            .count() as u64,
+        near_pairs: {
+            let xf: Vec<_> = t.last.body_q.iter().map(|q| q.xf()).collect();
+            CrowdFlat::new(&scene.crowd, &run.contact)?.near_pairs(&xf, 0, u32::MAX).0.len() as u64
+        },
+        colours: 0,
+    };
+    let split = crate::scene::time_split(gpu, &pipe, &solver, t.frames.min(10));
+    Ok(report(scene, run, t, last, split, gpu))
 }

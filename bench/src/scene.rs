@@ -219,6 +219,16 @@ pub fn warm_up(gpu: &GpuContext, pipe: &ContactPipeline, solver: &GpuSolver, sta
 /// Table I's split of a frame, timed on the current state: contact handling alone, then the solver step
 /// alone, each over `frames` frames recorded into one submission [ms per frame].
 pub fn time_split(gpu: &GpuContext, pipe: &ContactPipeline, solver: &GpuSolver, frames: u32) -> (f64, f64) {
+    time_parts(gpu, frames, &|enc| pipe.encode(enc), &|enc| solver.encode(enc))
+}
+
+/// Two parts of a frame, each alone over `frames` frames recorded into one submission [ms per frame].
+pub fn time_parts(
+    gpu: &GpuContext,
+    frames: u32,
+    a: &dyn Fn(&mut factory_engine::wgpu::CommandEncoder),
+    b: &dyn Fn(&mut factory_engine::wgpu::CommandEncoder),
+) -> (f64, f64) {
     let time = |record: &dyn Fn(&mut factory_engine::wgpu::CommandEncoder)| {
         let t = Instant::now();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
@@ -229,7 +239,7 @@ pub fn time_split(gpu: &GpuContext, pipe: &ContactPipeline, solver: &GpuSolver, 
         gpu.wait();
         t.elapsed().as_secs_f64() * 1e3 / frames as f64
     };
-    (time(&|enc| pipe.encode(enc)), time(&|enc| solver.encode(enc)))
+    (time(a), time(b))
 }
 
 /// Deepest contact over every pair and world.

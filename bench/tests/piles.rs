@@ -8,7 +8,7 @@
 //! ~17 rad/s, 14 mm in one 1/60 s frame, more than the contact offset sees coming; it penetrates by
 //! 4.4 mm for a frame and is pushed out at the max depenetration velocity (2.8 mm at dt = 1/120 s).
 
-use factory_bench::pile::{run_pile, PileKind, PileRun};
+use factory_bench::pile::{run_pile, PileKind, PileRun, PileSolver};
 use factory_engine::contact::ContactConfig;
 use factory_engine::gpu::GpuContext;
 
@@ -24,20 +24,27 @@ const REST_SPEED: f64 = 0.01;
 
 #[test]
 fn a_pile_of_toruses_comes_to_rest_and_no_torus_outruns_free_fall() {
-    pile_comes_to_rest(PileKind::Toruses);
+    pile_comes_to_rest(PileKind::Toruses, 8, PileSolver::Serial);
 }
 
 /// The same for M16 nuts (a 64-resolution grid of a coarse-thread nut; Table II: 1 substep, 16 iterations);
 /// measured 2026-11-22: 0.14 mm in the last second, 3.6 mm/s at the end, fastest 0.50 m/s (free fall 1.05).
 #[test]
 fn a_pile_of_nuts_comes_to_rest_and_no_nut_outruns_free_fall() {
-    pile_comes_to_rest(PileKind::Nuts);
+    pile_comes_to_rest(PileKind::Nuts, 8, PileSolver::Serial);
 }
 
-fn pile_comes_to_rest(kind: PileKind) {
+/// The coloured many-body solver (`factory_engine::crowd`: near pairs found every frame, graph-coloured
+/// Gauss-Seidel) on the same pile as the serial solver above.
+#[test]
+fn a_coloured_pile_of_toruses_comes_to_rest_and_no_torus_outruns_free_fall() {
+    pile_comes_to_rest(PileKind::Toruses, 8, PileSolver::Coloured);
+}
+
+fn pile_comes_to_rest(kind: PileKind, bodies: u32, pile_solver: PileSolver) {
     let run = PileRun {
         kind,
-        bodies: 8,
+        bodies,
         worlds: 1,
         seconds: SECONDS,
         contact: ContactConfig { max_patches: 16, ..Default::default() },
@@ -45,6 +52,7 @@ fn pile_comes_to_rest(kind: PileKind) {
         mu: 0.5,
         contact_offset: 0.01,
         seed: 1,
+        pile_solver,
     };
     let r = run_pile(GpuContext::global().unwrap(), &run).unwrap();
     eprintln!("{}", serde_json::to_string_pretty(&r).unwrap());
@@ -84,7 +92,8 @@ fn a_small_pile_on_the_gpu_steps_like_the_cpu_reference() {
     let scene = pile_scene(kind, 4, 0.01, 0.5, 3).unwrap();
     let cfg = kind.paper_solver();
     let cc = ContactConfig { max_patches: 16, ..Default::default() };
-    let pipe = ContactPipeline::new(g, &scene.contacts, 1, &cc).unwrap();
+    let fixed = scene.fixed_pairs();
+    let pipe = ContactPipeline::new(g, &fixed, 1, &cc).unwrap();
     let solver = GpuSolver::new(g, &pipe, &scene.bodies, &cfg).unwrap();
     let mut state = BodyState { body_q: scene.start.clone(), body_qd: vec![[Vec3::ZERO; 2]; 4] };
     let (mut worst_p, mut worst_v, mut body_rows) = (0.0f32, 0.0f32, 0usize);

@@ -200,6 +200,101 @@ impl GpuContext {
         })
     }
 
+    /// An explicit pipeline layout: one bind group layout per entry of `groups`, each a list of
+    /// bindings 0, 1, ... (compute stage). Pipelines built on one explicit layout share bind groups, and a
+    /// dynamic-offset uniform selects per-dispatch parameters (the automatic layouts of
+    /// [`bind_group`](Self::bind_group) allow neither).
+    pub fn explicit_layout(&self, label: &str, groups: &[&[Binding]]) -> ExplicitLayout {
+        let groups: Vec<wgpu::BindGroupLayout> = groups
+            .iter()
+            .map(|bindings| {
+                let entries: Vec<wgpu::BindGroupLayoutEntry> = bindings
+                    .iter()
+                    .enumerate()
+                    .map(|(i, b)| wgpu::BindGroupLayoutEntry {
+                        binding: i as u32,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::Buffer {
+                            ty: match b {
+                                Binding::Uniform | Binding::UniformDynamic => wgpu::BufferBindingType::Uniform,
+                                Binding::Storage { read_only } => {
+                                    wgpu::BufferBindingType::Storage { read_only: *read_only }
+                                }
+                            },
+                            has_dynamic_offset: matches!(b, Binding::UniformDynamic),
+                            min_binding_size: None,
+                        },
+                        count: None,
+                    })
+                    .collect();
+                self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some(label),
+                    entries: &entries,
+                })
+            })
+            .collect();
+        let refs: Vec<Option<&wgpu::BindGroupLayout>> = groups.iter().map(Some).collect();
+        let pipeline = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &refs,
+            immediate_size: 0,
+        });
+        ExplicitLayout { groups, pipeline }
+    }
+
+    /// A compute pipeline for entry point `entry` of `source` on an explicit layout.
+    pub fn pipeline_on(
+        &self,
+        layout: &ExplicitLayout,
+        label: &str,
+        source: &str,
+        entry: &str,
+    ) -> wgpu::ComputePipeline {
+        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: Some(&layout.pipeline),
+            module: &module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        })
+    }
+
+    /// Bind group `index` of an explicit layout with `buffers` at bindings 0, 1, ...; a dynamic-offset
+    /// uniform binds `dynamic_size` bytes of its buffer (the offset is given at dispatch).
+    pub fn bind_explicit(
+        &self,
+        layout: &ExplicitLayout,
+        index: usize,
+        buffers: &[&wgpu::Buffer],
+        dynamic_size: u64,
+    ) -> wgpu::BindGroup {
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &layout.groups[index],
+            entries: &buffers
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry {
+                    binding: i as u32,
+                    resource: if dynamic_size > 0 {
+                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: b,
+                            offset: 0,
+                            size: std::num::NonZeroU64::new(dynamic_size),
+                        })
+                    } else {
+                        b.as_entire_binding()
+                    },
+                })
+                .collect::<Vec<_>>(),
+        })
+    }
+
     /// Copies `buffer` back to the host and waits. For tests, benchmarks and logging; never in a step loop.
     pub fn read_buffer<T: Pod>(&self, buffer: &wgpu::Buffer) -> Vec<T> {
         self.read_buffer_prefix(buffer, buffer.size())
@@ -275,4 +370,21 @@ mod tests {
         let e = check_limits("toy", &l).unwrap_err().to_string();
         assert!(e.contains("max_storage_buffers_per_shader_stage = 4") && e.contains("at least 8"), "{e}");
     }
+}
+
+/// A binding of an [`GpuContext::explicit_layout`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Binding {
+    Uniform,
+    /// A uniform whose offset is set per dispatch (`set_bind_group(.., &[offset])`).
+    UniformDynamic,
+    Storage {
+        read_only: bool,
+    },
+}
+
+/// Bind group layouts and the pipeline layout made of them.
+pub struct ExplicitLayout {
+    pub groups: Vec<wgpu::BindGroupLayout>,
+    pub pipeline: wgpu::PipelineLayout,
 }

@@ -13,6 +13,7 @@ pub use error::{EngineError, Result};
 pub use wgpu;
 pub mod builder;
 pub mod contact;
+pub mod crowd;
 pub mod fsutil;
 pub mod gpu;
 pub mod rng;

@@ -8,6 +8,7 @@ use glam::{Vec3, Vec4};
 pub(crate) const COMMON_WGSL: &str = include_str!("common.wgsl");
 pub(crate) const GENERATE_WGSL: &str = concat!(
     include_str!("generate.wgsl"),
+    include_str!("generate_core.wgsl"),
     include_str!("sdf_sample.wgsl"),
     include_str!("../sdf/thread.wgsl"),
     include_str!("../sdf/revolved.wgsl")

@@ -23,88 +23,6 @@ struct Job {
 @group(2) @binding(1) var<storage, read_write> job_patch_count: array<u32>;
 @group(2) @binding(2) var<storage, read_write> pair_candidates: array<atomic<u32>>;
 
-struct Candidate {
-    x: vec3<f32>,
-    s: Sample,
-}
-
-// Projected gradient descent of the SDF over triangle (a, b, c); degenerate triangles (spheres: three
-// equal corners, capsules: two) descend along their segment or stay at their point. `start` is the
-// centroid and its sample, which the caller's cull has taken already (a sample is most of an iteration's
-// cost with the analytic thread SDF).
-fn minimise_on_triangle(
-    pair: Pair,
-    a: vec3<f32>,
-    b: vec3<f32>,
-    c: vec3<f32>,
-    start: Candidate,
-    iterations: u32,
-) -> Candidate {
-    let e1 = b - a;
-    let e2 = c - a;
-    let g11 = dot(e1, e1);
-    let g12 = dot(e1, e2);
-    let g22 = dot(e2, e2);
-    let det = g11 * g22 - g12 * g12;
-    // Start from the lowest of the corners and the centroid.
-    var uv = vec2<f32>(1.0 / 3.0, 1.0 / 3.0);
-    var x = start.x;
-    var s = start.s;
-    let corners = array<vec2<f32>, 3>(vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(0.0, 1.0));
-    for (var i = 0u; i < 3u; i++) {
-        let xi = a + corners[i].x * e1 + corners[i].y * e2;
-        let si = sdf_sample(pair, xi);
-        if (si.d < s.d) {
-            uv = corners[i];
-            x = xi;
-            s = si;
-        }
-    }
-    let longest = max(g11, max(g22, dot(c - b, c - b)));
-    if (longest <= 0.0) {
-        return Candidate(x, s);
-    }
-    let planar = det > 1.0e-6 * g11 * g22;
-    // Segment direction for degenerate triangles: the longer edge from a.
-    let seg = select(e2, e1, g11 >= g22);
-    let seg_len2 = max(g11, g22);
-    var step = 0.5 * sqrt(longest);
-    for (var it = 0u; it < iterations; it++) {
-        var duv: vec2<f32>;
-        var dw: vec3<f32>;
-        if (planar) {
-            let r1 = -dot(e1, s.g);
-            let r2 = -dot(e2, s.g);
-            duv = vec2<f32>((g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det);
-            dw = duv.x * e1 + duv.y * e2;
-        } else {
-            let t = -dot(seg, s.g) / seg_len2;
-            duv = select(vec2<f32>(0.0, t), vec2<f32>(t, 0.0), g11 >= g22);
-            dw = t * seg;
-        }
-        let len = length(dw);
-        if (len <= 0.0) {
-            break;
-        }
-        var nuv = max(uv + duv * (step / len), vec2<f32>(0.0));
-        let sum = nuv.x + nuv.y;
-        if (sum > 1.0) {
-            nuv = nuv / sum;
-        }
-        let nx = a + nuv.x * e1 + nuv.y * e2;
-        let ns = sdf_sample(pair, nx);
-        if (ns.d < s.d) {
-            uv = nuv;
-            x = nx;
-            s = ns;
-            step = step * 1.5;
-        } else {
-            step = step * 0.5;
-        }
-    }
-    return Candidate(x, s);
-}
-
 @compute @workgroup_size(WG)
 fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
     let job_index = wid.x;
@@ -129,63 +47,11 @@ fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wi
         }
         return;
     }
-    let b_from_a = xf_mul(xf_inv(world_b), world_a);
-    let offset = pair.contact_offset;
-    reset_patches(lid);
-    var pc = 0u;
-    var found = 0u;
-    for (var base = 0u; base < job.tri_count; base += WG) {
-        var cand = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
-        var normal = vec4<f32>(0.0);
-        let t = base + lid;
-        if (t < job.tri_count) {
-            let v = (job.tri_first + t) * 3u;
-            let a = xf_point(b_from_a, tri_verts[v].xyz);
-            let b = xf_point(b_from_a, tri_verts[v + 1u].xyz);
-            let c = xf_point(b_from_a, tri_verts[v + 2u].xyz);
-            // Cull: the SDF at the centroid bounds the distance of the whole triangle (1-Lipschitz,
-            // plus one voxel for interpolation error).
-            // (Written as the descent's barycentric start, which reuses this sample: same rounding.)
-            let centroid = a + (1.0 / 3.0) * (b - a) + (1.0 / 3.0) * (c - a);
-            let reach = sqrt(max(dot(a - centroid, a - centroid), max(dot(b - centroid, b - centroid), dot(c - centroid, c - centroid))));
-            let sc = sdf_sample(pair, centroid);
-            let slack = select(pair.sdf_origin.w, 0.0, pair.sdf_kind == 1u);
-            if (sc.d - reach - pair.radius - slack <= offset) {
-                let m = minimise_on_triangle(pair, a, b, c, Candidate(centroid, sc), params.iterations);
-                let depth = m.s.d - pair.radius;
-                let glen = length(m.s.g);
-                if (depth < offset && glen > 0.0) {
-                    let n = m.s.g / glen;
-                    cand = vec4<f32>(m.x - pair.radius * n, depth);
-                    let area = 0.5 * length(cross(b - a, c - a));
-                    normal = vec4<f32>(n, f32(max(1u, u32(round(area / pair.area_unit)))));
-                    found += 1u;
-                }
-            }
-        }
-        put_candidate(lid, cand, normal);
-        pc = reduce_batch(lid, pc, params.normal_cos, offset, pair.min_separation);
-    }
-    if (found > 0u) {
-        atomicAdd(&pair_candidates[world * params.pair_count + job.pair], found);
-    }
-    workgroupBarrier(); // the last batch's slot writes
-    // Write this job's patches in world coordinates.
-    let out_base = (world * params.job_count + job_index) * MAX_PATCHES;
-    for (var p = lid; p < pc; p += WG) {
-        var o: PatchOut;
-        o.normal = vec4<f32>(quat_rotate(world_b.q, patch_n[p].xyz), f32(atomicLoad(&patch_area[p])) * pair.area_unit);
-        for (var s = 0u; s < 4u; s++) {
-            let sl = patch_slot[p * 4u + s];
-            if (sl.w < VALID_BELOW) {
-                o.slots[s] = vec4<f32>(xf_point(world_b, sl.xyz), sl.w);
-            } else {
-                o.slots[s] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
-            }
-        }
-        job_patches[out_base + p] = o;
+    let out = generate_job(lid, pair, job.tri_first, job.tri_count, world_a, world_b, (world * params.job_count + job_index) * MAX_PATCHES);
+    if (out.y > 0u) {
+        atomicAdd(&pair_candidates[world * params.pair_count + job.pair], out.y);
     }
     if (lid == 0u) {
-        job_patch_count[world * params.job_count + job_index] = pc;
+        job_patch_count[world * params.job_count + job_index] = out.x;
     }
 }

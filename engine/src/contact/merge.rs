@@ -6,7 +6,7 @@ use super::reduce::{Candidate, Reducer};
 use super::ContactConfig;
 use glam::Vec4;
 
-pub(crate) const MERGE_WGSL: &str = include_str!("merge.wgsl");
+pub(crate) const MERGE_WGSL: &str = concat!(include_str!("merge.wgsl"), include_str!("merge_core.wgsl"));
 
 /// The merge pipeline.
 pub struct MergeKernel {

@@ -283,4 +283,4 @@ mod tests {
     }
 }
 #[cfg(test)]
-mod shader_tests;
+pub(crate) mod shader_tests;

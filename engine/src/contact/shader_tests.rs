@@ -5,7 +5,7 @@ use super::generate::{shader_source, GENERATE_WGSL};
 use super::merge::MERGE_WGSL;
 use super::normals::NORMALS_WGSL;
 
-fn validate(src: &str) -> Result<(), String> {
+pub(crate) fn validate(src: &str) -> Result<(), String> {
     let module = naga::front::wgsl::parse_str(src).map_err(|e| e.emit_to_string(src))?;
     naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
         .validate(&module)

@@ -10,6 +10,7 @@ use bytemuck::{Pod, Zeroable};
 
 pub(crate) const SOLVER_WGSL: &str = concat!(
     include_str!("solver.wgsl"),
+    include_str!("solver_core.wgsl"),
     include_str!("../contact/sdf_sample.wgsl"),
     include_str!("../sdf/thread.wgsl"),
     include_str!("../sdf/revolved.wgsl")
@@ -102,6 +103,54 @@ impl BodyModel {
     }
 }
 
+/// The solver's uniform for `world_count` worlds of `model` (pair_count and max_rows as the kernel lays out
+/// its rows; loop_budget 0: unlimited).
+pub(crate) fn solver_params(
+    cfg: &SolverConfig,
+    model: &BodyModel,
+    world_count: u32,
+    pair_count: u32,
+    max_rows: u32,
+    loop_budget: u32,
+) -> SolverParamsGpu {
+    SolverParamsGpu {
+        world_count,
+        body_count: model.body_count() as u32,
+        pair_count,
+        max_rows,
+        dt: cfg.dt,
+        substeps: cfg.substeps,
+        pos_iters: cfg.pos_iters,
+        vel_iters: cfg.vel_iters,
+        max_depenetration_velocity: cfg.max_depenetration_velocity,
+        rest_offset: cfg.rest_offset,
+        max_speed: cfg.max_speed,
+        patch_iters: cfg.patch_iters,
+        gravity: model.gravity.extend(0.0).to_array(),
+        loop_budget,
+        friction_per_patch: cfg.friction_per_patch as u32,
+        _pad: [0; 2],
+    }
+}
+
+/// The bodies as the kernels read them.
+pub(crate) fn bodies_gpu(model: &BodyModel) -> Vec<BodyGpu> {
+    (0..model.body_count())
+        .map(|i| {
+            let m = model.body_inv_inertia[i];
+            BodyGpu {
+                inv_inertia: [
+                    m.x_axis.extend(0.0).to_array(),
+                    m.y_axis.extend(0.0).to_array(),
+                    m.z_axis.extend(0.0).to_array(),
+                ],
+                com_inv_mass: model.body_com[i].extend(model.body_inv_mass[i]).to_array(),
+                flags: [model.is_kinematic(i) as u32, 0, 0, 0],
+            }
+        })
+        .collect()
+}
+
 /// GPU solver state for one contact pipeline: body velocities, per-world scratch, pipeline.
 pub struct GpuSolver {
     pub cfg: SolverConfig,
@@ -155,38 +204,8 @@ impl GpuSolver {
                 });
             }
         }
-        let params = SolverParamsGpu {
-            world_count,
-            body_count: contacts.body_count,
-            pair_count,
-            max_rows,
-            dt: cfg.dt,
-            substeps: cfg.substeps,
-            pos_iters: cfg.pos_iters,
-            vel_iters: cfg.vel_iters,
-            max_depenetration_velocity: cfg.max_depenetration_velocity,
-            rest_offset: cfg.rest_offset,
-            max_speed: cfg.max_speed,
-            patch_iters: cfg.patch_iters,
-            gravity: model.gravity.extend(0.0).to_array(),
-            loop_budget,
-            friction_per_patch: cfg.friction_per_patch as u32,
-            _pad: [0; 2],
-        };
-        let bodies: Vec<BodyGpu> = (0..model.body_count())
-            .map(|i| {
-                let m = model.body_inv_inertia[i];
-                BodyGpu {
-                    inv_inertia: [
-                        m.x_axis.extend(0.0).to_array(),
-                        m.y_axis.extend(0.0).to_array(),
-                        m.z_axis.extend(0.0).to_array(),
-                    ],
-                    com_inv_mass: model.body_com[i].extend(model.body_inv_mass[i]).to_array(),
-                    flags: [model.is_kinematic(i) as u32, 0, 0, 0],
-                }
-            })
-            .collect();
+        let params = solver_params(cfg, model, world_count, pair_count, max_rows, loop_budget);
+        let bodies = bodies_gpu(model);
         let dev = &gpu.device;
         let uniform = {
             use wgpu::util::DeviceExt;

@@ -227,6 +227,24 @@ pub struct WarmStart {
     rows: Vec<Vec<Row>>,
 }
 
+impl WarmStart {
+    /// Renumbers the pairs of last frame's rows (`map`: old pair index -> new, None: the pair is gone and
+    /// its rows are dropped), for callers whose pair list changes from frame to frame (crate::crowd).
+    pub fn remap_pairs(&mut self, map: impl Fn(usize) -> Option<usize>) {
+        for rows in &mut self.rows {
+            rows.retain_mut(|r| match map(r.pair) {
+                Some(p) => {
+                    r.pair = p;
+                    true
+                }
+                None => false,
+            });
+            // Stable: a patch's rows keep their slot order, which the match's tie-break follows.
+            rows.sort_by_key(|r| (r.pair, r.patch));
+        }
+    }
+}
+
 fn xf(t: &TransformGpu) -> (Vec3, Quat) {
     (Vec3::new(t.p[0], t.p[1], t.p[2]), Quat::from_xyzw(t.q[0], t.q[1], t.q[2], t.q[3]))
 }

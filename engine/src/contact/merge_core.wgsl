@@ -1,0 +1,67 @@
+// Second level of contact reduction for one pair (the body of a merge workgroup), shared by merge.wgsl and
+// crowd/merge.wgsl: reads the patches of the pair's `job_count` jobs at job_patches[(job_base + j) *
+// MAX_PATCHES..] (counts at job_patch_count[job_base + j]) and writes at most MAX_PATCHES patches to
+// patches[out_base..]; returns their number. Called in uniform control flow (the reduction's barriers).
+
+fn merge_jobs(lid: u32, pair: Pair, job_base: u32, job_count: u32, out_base: u32) -> u32 {
+    reset_patches(lid);
+    var pc = 0u;
+    // The jobs' slots form one stream (job by job, 4 slots per patch), cut into batches of WG: most jobs
+    // hold far fewer than WG slots, and a batch costs the same (its barriers and slot rounds) however few
+    // candidates it holds.
+    var total = 0u;
+    for (var j = 0u; j < job_count; j++) {
+        total += job_patch_count[job_base + j] * 4u;
+    }
+    var first_job = 0u; // the job holding stream index `base`, and its first index
+    var first_off = 0u;
+    for (var base = 0u; base < total; base += WG) {
+        loop {
+            let n = job_patch_count[job_base + first_job] * 4u;
+            if (first_off + n > base) {
+                break;
+            }
+            first_off += n;
+            first_job++;
+        }
+        var cand = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
+        var normal = vec4<f32>(0.0);
+        let i = base + lid;
+        if (i < total) {
+            var j = first_job;
+            var off = first_off;
+            loop {
+                let n = job_patch_count[job_base + j] * 4u;
+                if (i < off + n) {
+                    break;
+                }
+                off += n;
+                j++;
+            }
+            let k = i - off;
+            let p = job_patches[(job_base + j) * MAX_PATCHES + k / 4u];
+            let sl = p.slots[k % 4u];
+            if (sl.w < VALID_BELOW) {
+                var used = 0u;
+                for (var s = 0u; s < 4u; s++) {
+                    used += select(0u, 1u, p.slots[s].w < VALID_BELOW);
+                }
+                cand = sl;
+                let units = p.normal.w / (f32(used) * pair.area_unit);
+                normal = vec4<f32>(p.normal.xyz, f32(max(1u, u32(round(units)))));
+            }
+        }
+        put_candidate(lid, cand, normal);
+        pc = reduce_batch(lid, pc, params.normal_cos, pair.contact_offset, pair.min_separation);
+    }
+    workgroupBarrier(); // the last batch's slot writes
+    for (var p = lid; p < pc; p += WG) {
+        var o: PatchOut;
+        o.normal = vec4<f32>(patch_n[p].xyz, f32(atomicLoad(&patch_area[p])) * pair.area_unit);
+        for (var s = 0u; s < 4u; s++) {
+            o.slots[s] = patch_slot[p * 4u + s];
+        }
+        patches[out_base + p] = o;
+    }
+    return pc;
+}

@@ -1,0 +1,664 @@
+//! The many-body world on the GPU (near.wgsl, contacts.wgsl, solve.wgsl): buffers, pipelines and the
+//! per-frame dispatches. The CPU twin is [`super::CrowdCpu`]; `engine/tests/crowd.rs` checks parity,
+//! the colouring and bitwise determinism.
+
+use super::{CrowdConfig, CrowdFlat, CrowdFrame, CrowdModel, NearPair, COLOUR_NONE, UNCOLOURED};
+use crate::contact::generate::{shader_source_wg, SdfKinds};
+use crate::contact::model::{PairGpu, ParamsGpu, PatchGpu};
+use crate::contact::pipeline::to_patches;
+use crate::contact::{ContactConfig, Patch, TransformGpu};
+use crate::error::{EngineError, Result};
+use crate::gpu::{Binding, ExplicitLayout, GpuContext};
+use crate::solver::gpu::{bodies_gpu, solver_params};
+use crate::solver::{BodyModel, BodyState, Control, SolverConfig};
+use bytemuck::{Pod, Zeroable};
+use glam::{Quat, Vec3};
+
+const CROWD_COMMON: &str = include_str!("crowd_common.wgsl");
+const NEAR_WGSL: &str = include_str!("near.wgsl");
+const CONTACTS_WGSL: &str = concat!(
+    include_str!("contacts.wgsl"),
+    include_str!("../contact/generate_core.wgsl"),
+    include_str!("../contact/sdf_sample.wgsl"),
+    include_str!("../sdf/thread.wgsl"),
+    include_str!("../sdf/revolved.wgsl")
+);
+const MERGE_WGSL: &str = concat!(include_str!("merge.wgsl"), include_str!("../contact/merge_core.wgsl"));
+const SOLVE_WGSL: &str = concat!(
+    include_str!("solve.wgsl"),
+    include_str!("../solver/solver_core.wgsl"),
+    include_str!("../contact/sdf_sample.wgsl"),
+    include_str!("../sdf/thread.wgsl"),
+    include_str!("../sdf/revolved.wgsl")
+);
+
+/// Words at the head of a world's meta block (crowd_common.wgsl's M_HEAD).
+const M_HEAD: u32 = 64;
+const M_COUNT: usize = 0;
+const M_FLAGS: usize = 1;
+const M_COLOURS: usize = 3;
+const M_PATCHES: usize = 4;
+/// Indirect arguments (crowd_common.wgsl's A_*): pairs, generate, merge, then 32 colours.
+const A_PAIRS: u64 = 0;
+const A_GENERATE: u64 = 3;
+const A_MERGE: u64 = 6;
+const A_COLOUR: u64 = 9;
+const ARGS_WORDS: u64 = A_COLOUR + 3 * 32;
+/// Solver pass phases (PassParams: warm, bias, resample), one uniform slot per phase and colour.
+const PHASES: [[u32; 3]; 5] = [[1, 1, 0], [0, 1, 1], [0, 1, 0], [0, 0, 1], [0, 0, 0]];
+
+/// GPU mirror of `CrowdParams` in crowd_common.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct CrowdParamsGpu {
+    pub world_count: u32,
+    pub body_count: u32,
+    pub cap: u32,
+    pub jobs_per_pair: u32,
+    pub chunk: u32,
+    pub class_count: u32,
+    pub static_count: u32,
+    pub max_colours: u32,
+    pub meta_stride: u32,
+    pub patch_budget: u32,
+    pub _pad: [u32; 2],
+}
+
+/// GPU mirror of `PassParams` in crowd_common.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct PassParamsGpu {
+    index: u32,
+    warm: u32,
+    bias: u32,
+    resample: u32,
+}
+
+/// Figures of one world's last frame, read back for reports.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CrowdStats {
+    /// Near pairs in the list.
+    pub pairs: u32,
+    /// Near pairs with at least one patch.
+    pub touching_pairs: u32,
+    /// Contact candidates before reduction, all pairs.
+    pub candidates: u64,
+    /// Patches after reduction, all pairs.
+    pub patches: u32,
+    /// Contacts after reduction, all pairs.
+    pub contacts: u32,
+    pub colours: u32,
+    pub flags: u32,
+}
+
+struct Kernel {
+    pipeline: wgpu::ComputePipeline,
+}
+
+/// Buffers and pipelines of many-body worlds (see the module doc of [`super`]).
+pub struct CrowdPipeline {
+    pub flat: CrowdFlat,
+    pub cfg: CrowdConfig,
+    pub contact: ContactConfig,
+    pub solver: SolverConfig,
+    pub world_count: u32,
+    pub body_count: u32,
+    params: CrowdParamsGpu,
+    /// Body poses, shape [world_count * body_count].
+    pub body_q: wgpu::Buffer,
+    /// Body velocities (linear, angular) [m/s, rad/s], shape [world_count * body_count * 2] vec4.
+    pub body_qd: wgpu::Buffer,
+    /// Status per world, external wrenches, two blocks of rows (solve.wgsl).
+    pub scratch: wgpu::Buffer,
+    /// Near-pair records, shape [world_count * max_pairs].
+    pub crowd_pairs: wgpu::Buffer,
+    /// Per-world bookkeeping (crowd_common.wgsl).
+    pub meta: wgpu::Buffer,
+    /// Reduced patches, shape [world_count * max_pairs * max_patches].
+    pub patches: wgpu::Buffer,
+    args: wgpu::Buffer,
+    pass_stride: u64,
+    near: [Kernel; 7],
+    contacts: [Kernel; 2],
+    merge: Kernel,
+    solve: [Kernel; 5],
+    near_groups: Vec<wgpu::BindGroup>,
+    round_groups: Vec<wgpu::BindGroup>,
+    contact_groups: Vec<wgpu::BindGroup>,
+    merge_groups: Vec<wgpu::BindGroup>,
+    solve_groups: Vec<wgpu::BindGroup>,
+}
+
+fn too_large(gpu: &GpuContext, what: String, bytes: u64, hint: &str) -> Result<()> {
+    let limit = gpu.limits().max_storage_buffer_binding_size;
+    if bytes > limit {
+        return Err(EngineError::TooLarge { what, needed_bytes: bytes, limit_bytes: limit, hint: hint.into() });
+    }
+    Ok(())
+}
+
+impl CrowdPipeline {
+    /// Validates the settings against the model and the device, uploads the model, builds the pipelines.
+    pub fn new(
+        gpu: &GpuContext,
+        model: &CrowdModel,
+        bodies: &BodyModel,
+        world_count: u32,
+        cfg: &CrowdConfig,
+        contact: &ContactConfig,
+        solver: &SolverConfig,
+    ) -> Result<Self> {
+        cfg.validate()?;
+        solver.validate()?;
+        bodies.validate()?;
+        let flat = CrowdFlat::new(model, contact)?;
+        let n = model.body_count;
+        if bodies.body_count() as u32 != n {
+            return Err(EngineError::Config {
+                field: "body_count",
+                value: bodies.body_count().to_string(),
+                expected: format!("the crowd model's {n} bodies"),
+            });
+        }
+        let limits = gpu.limits();
+        let max_dim = limits.max_compute_workgroups_per_dimension;
+        if world_count == 0 || world_count > max_dim {
+            return Err(EngineError::Config {
+                field: "world_count",
+                value: world_count.to_string(),
+                expected: format!("1..={max_dim}"),
+            });
+        }
+        let jobs = flat.jobs_per_pair;
+        if cfg.max_pairs as u64 * jobs as u64 > max_dim as u64 {
+            return Err(EngineError::Config {
+                field: "max_pairs",
+                value: cfg.max_pairs.to_string(),
+                expected: format!(
+                    "at most {} ({max_dim} workgroups per dispatch / {jobs} jobs per pair)",
+                    max_dim / jobs
+                ),
+            });
+        }
+        if contact.workgroup_bytes() > limits.max_compute_workgroup_storage_size {
+            return Err(EngineError::Gpu(format!(
+                "max_patches = {} needs {} bytes of workgroup memory; adapter {:?} offers {}",
+                contact.max_patches,
+                contact.workgroup_bytes(),
+                gpu.info.name,
+                limits.max_compute_workgroup_storage_size
+            )));
+        }
+        let (w, cap, mp) = (world_count as u64, cfg.max_pairs as u64, contact.max_patches as u64);
+        let meta_stride = M_HEAD + 4 * n + 9 * cfg.max_pairs;
+        let patch_bytes = std::mem::size_of::<PatchGpu>() as u64;
+        let rows_vec4 = 2 * w * cfg.max_patches_per_world as u64 * 4 * 4;
+        let scratch_bytes = (w * (1 + 2 * n as u64) + rows_vec4) * 16;
+        let hint = "use fewer worlds per pipeline, a smaller max_pairs, max_patches or max_patches_per_world";
+        too_large(
+            gpu,
+            format!("near-pair job patches ({w} worlds x {cap} pairs x {jobs} jobs x {mp} patches)"),
+            w * cap * jobs as u64 * mp * patch_bytes,
+            hint,
+        )?;
+        too_large(
+            gpu,
+            format!("solver rows ({w} worlds x {} patches x 2 frames)", cfg.max_patches_per_world),
+            scratch_bytes,
+            hint,
+        )?;
+        too_large(gpu, "SDF values".into(), flat.flat.sdf_values.len() as u64 * 4, "lower the SDF resolution")?;
+
+        let params = CrowdParamsGpu {
+            world_count,
+            body_count: n,
+            cap: cfg.max_pairs,
+            jobs_per_pair: jobs,
+            chunk: flat.chunk,
+            class_count: model.class_count,
+            static_count: model.static_count,
+            max_colours: cfg.max_colours,
+            meta_stride,
+            patch_budget: cfg.max_patches_per_world,
+            _pad: [0; 2],
+        };
+        let contact_params = ParamsGpu {
+            world_count,
+            body_count: n,
+            pair_count: cfg.max_pairs,
+            job_count: jobs,
+            normal_cos: contact.normal_cos,
+            iterations: contact.iterations,
+            world_offset: 0,
+            _pad: 0,
+        };
+        let sp = solver_params(solver, bodies, world_count, cfg.max_pairs, cfg.max_patches_per_world * 4, 0);
+        let dev = &gpu.device;
+        let uniform = |label: &str, bytes: &[u8]| {
+            use wgpu::util::DeviceExt;
+            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytes,
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        };
+        let cp_buf = uniform("crowd-params", bytemuck::bytes_of(&params));
+        let contact_buf = uniform("crowd-contact-params", bytemuck::bytes_of(&contact_params));
+        let sp_buf = uniform("crowd-solver-params", bytemuck::bytes_of(&sp));
+        // Per-dispatch parameters: the colouring rounds, then 5 solver phases x 32 colours.
+        let pass_stride = (limits.min_uniform_buffer_offset_alignment as u64).max(16);
+        let mut passes = Vec::new();
+        for r in 0..cfg.colour_rounds {
+            passes.push(PassParamsGpu { index: r, warm: 0, bias: 0, resample: 0 });
+        }
+        for [warm, bias, resample] in PHASES {
+            for c in 0..32 {
+                passes.push(PassParamsGpu { index: c, warm, bias, resample });
+            }
+        }
+        let mut pass_bytes = vec![0u8; passes.len() * pass_stride as usize];
+        for (i, p) in passes.iter().enumerate() {
+            let at = i * pass_stride as usize;
+            pass_bytes[at..at + 16].copy_from_slice(bytemuck::bytes_of(p));
+        }
+        let pass_buf = uniform("crowd-passes", &pass_bytes);
+
+        let none = wgpu::BufferUsages::empty();
+        let templates = gpu.storage_buffer("crowd-templates", &flat.flat.pairs, none);
+        let mut rules = model.body_class.clone();
+        rules.extend(&model.body_rule);
+        rules.extend(&model.static_rule);
+        let rules = gpu.storage_buffer("crowd-rules", &rules, none);
+        let tri_verts = gpu.storage_buffer("crowd-tri-verts", &flat.flat.tri_verts, none);
+        let sdf_values = gpu.storage_buffer("crowd-sdf-values", &flat.flat.sdf_values, none);
+        let identity = vec![TransformGpu::new(Vec3::ZERO, Quat::IDENTITY); (w * n as u64) as usize];
+        let body_q = gpu.storage_buffer("crowd-body-q", &identity, none);
+        let body_qd = gpu.storage_buffer_zeroed("crowd-body-qd", w * n as u64 * 32);
+        let scratch = gpu.storage_buffer_zeroed("crowd-scratch", scratch_bytes);
+        let crowd_pairs = gpu.storage_buffer_zeroed("crowd-pairs", w * cap * std::mem::size_of::<PairGpu>() as u64);
+        let meta = gpu.storage_buffer_zeroed("crowd-meta", w * meta_stride as u64 * 4);
+        let args = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("crowd-args"),
+            size: ARGS_WORDS * 4,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::INDIRECT
+                | wgpu::BufferUsages::COPY_DST
+                | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let job_patches = gpu.storage_buffer_zeroed("crowd-job-patches", w * cap * jobs as u64 * mp * patch_bytes);
+        let job_patch_count = gpu.storage_buffer_zeroed("crowd-job-patch-count", w * cap * jobs as u64 * 4);
+        let patches = gpu.storage_buffer_zeroed("crowd-patches", w * cap * mp * patch_bytes);
+        let bodies_buf = gpu.storage_buffer("crowd-bodies", &bodies_gpu(bodies), none);
+
+        let ro = Binding::Storage { read_only: true };
+        let rw = Binding::Storage { read_only: false };
+        let kinds = SdfKinds::of(&flat.flat.pairs);
+        let wg = contact.workgroup_size;
+        let source = |body: &str| shader_source_wg(&format!("{CROWD_COMMON}\n{body}"), contact.max_patches, wg, kinds);
+        let near_layout = gpu.explicit_layout(
+            "crowd-near",
+            &[&[Binding::Uniform, ro, ro], &[ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
+        );
+        let contact_layout = gpu.explicit_layout(
+            "crowd-contacts",
+            &[&[Binding::Uniform, Binding::Uniform, ro, ro], &[ro, ro], &[rw, rw, rw]],
+        );
+        let merge_layout =
+            gpu.explicit_layout("crowd-merge", &[&[Binding::Uniform, Binding::Uniform], &[ro, ro, ro], &[rw, rw]]);
+        let solve_layout = gpu.explicit_layout(
+            "crowd-solve",
+            &[&[Binding::Uniform, Binding::Uniform, ro, ro], &[ro, ro, ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
+        );
+        let build = |layout: &ExplicitLayout, src: &str, entries: &[&str]| -> Vec<Kernel> {
+            entries.iter().map(|e| Kernel { pipeline: gpu.pipeline_on(layout, e, src, e) }).collect()
+        };
+        let near_src = source(NEAR_WGSL);
+        let near: [Kernel; 7] = build(
+            &near_layout,
+            &near_src,
+            &["keep_keys", "near_count", "near_scan", "near_emit", "incidence", "colour_round", "colour_sort"],
+        )
+        .try_into()
+        .unwrap_or_else(|_| unreachable!());
+        let contacts: [Kernel; 2] = build(&contact_layout, &source(CONTACTS_WGSL), &["crowd_generate", "crowd_alloc"])
+            .try_into()
+            .unwrap_or_else(|_| unreachable!());
+        let merge =
+            Kernel { pipeline: gpu.pipeline_on(&merge_layout, "crowd_merge", &source(MERGE_WGSL), "crowd_merge") };
+        let solve: [Kernel; 5] = build(
+            &solve_layout,
+            &source(SOLVE_WGSL),
+            &["crowd_build_rows", "crowd_velocities", "crowd_pass", "crowd_positions", "crowd_finish"],
+        )
+        .try_into()
+        .unwrap_or_else(|_| unreachable!());
+        let near_groups = vec![
+            gpu.bind_explicit(&near_layout, 0, &[&cp_buf, &templates, &rules], 0),
+            gpu.bind_explicit(&near_layout, 1, &[&body_q], 0),
+            gpu.bind_explicit(&near_layout, 2, &[&crowd_pairs, &meta, &args], 0),
+            gpu.bind_explicit(&near_layout, 3, &[&pass_buf], 16),
+        ];
+        // The colouring rounds are dispatched indirectly from crowd_args, which a dispatch may not also bind
+        // for writing: they get a stand-in (they never touch the arguments).
+        let stand_in = gpu.storage_buffer_zeroed("crowd-args-stand-in", ARGS_WORDS * 4);
+        let round_groups = vec![
+            gpu.bind_explicit(&near_layout, 0, &[&cp_buf, &templates, &rules], 0),
+            gpu.bind_explicit(&near_layout, 1, &[&body_q], 0),
+            gpu.bind_explicit(&near_layout, 2, &[&crowd_pairs, &meta, &stand_in], 0),
+            gpu.bind_explicit(&near_layout, 3, &[&pass_buf], 16),
+        ];
+        let contact_groups = vec![
+            gpu.bind_explicit(&contact_layout, 0, &[&contact_buf, &cp_buf, &tri_verts, &sdf_values], 0),
+            gpu.bind_explicit(&contact_layout, 1, &[&body_q, &crowd_pairs], 0),
+            gpu.bind_explicit(&contact_layout, 2, &[&job_patches, &job_patch_count, &meta], 0),
+        ];
+        let merge_groups = vec![
+            gpu.bind_explicit(&merge_layout, 0, &[&contact_buf, &cp_buf], 0),
+            gpu.bind_explicit(&merge_layout, 1, &[&crowd_pairs, &job_patches, &job_patch_count], 0),
+            gpu.bind_explicit(&merge_layout, 2, &[&meta, &patches], 0),
+        ];
+        let solve_groups = vec![
+            gpu.bind_explicit(&solve_layout, 0, &[&sp_buf, &cp_buf, &sdf_values, &bodies_buf], 0),
+            gpu.bind_explicit(&solve_layout, 1, &[&crowd_pairs, &patches, &meta], 0),
+            gpu.bind_explicit(&solve_layout, 2, &[&body_q, &body_qd, &scratch], 0),
+            gpu.bind_explicit(&solve_layout, 3, &[&pass_buf], 16),
+        ];
+        Ok(CrowdPipeline {
+            flat,
+            cfg: cfg.clone(),
+            contact: contact.clone(),
+            solver: solver.clone(),
+            world_count,
+            body_count: n,
+            params,
+            body_q,
+            body_qd,
+            scratch,
+            crowd_pairs,
+            meta,
+            patches,
+            args,
+            pass_stride,
+            near,
+            contacts,
+            merge,
+            solve,
+            near_groups,
+            round_groups,
+            contact_groups,
+            merge_groups,
+            solve_groups,
+        })
+    }
+
+    /// Uploads a state; every world starts cold (no warm-start impulses, an empty last-frame list).
+    pub fn write_state(&self, gpu: &GpuContext, state: &BodyState) {
+        let n = (self.world_count * self.body_count) as usize;
+        assert_eq!(state.body_q.len(), n, "body_q shape [world_count * body_count]");
+        assert_eq!(state.body_qd.len(), n, "body_qd shape [world_count * body_count]");
+        self.forget_warm_start(gpu);
+        gpu.queue.write_buffer(&self.body_q, 0, bytemuck::cast_slice(&state.body_q));
+        let qd: Vec<[f32; 4]> =
+            state.body_qd.iter().flat_map(|v| [v[0].extend(0.0).to_array(), v[1].extend(0.0).to_array()]).collect();
+        gpu.queue.write_buffer(&self.body_qd, 0, bytemuck::cast_slice(&qd));
+    }
+
+    /// Forgets every world's warm-start impulses and last frame's pairs; the external wrenches stay.
+    pub fn forget_warm_start(&self, gpu: &GpuContext) {
+        let (status, control) = self.control_range();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(&self.scratch, 0, Some(status));
+        enc.clear_buffer(&self.scratch, status + control, None);
+        enc.clear_buffer(&self.meta, 0, None);
+        gpu.queue.submit([enc.finish()]);
+    }
+
+    fn control_range(&self) -> (u64, u64) {
+        (self.world_count as u64 * 16, self.world_count as u64 * self.body_count as u64 * 32)
+    }
+
+    /// Sets the external wrenches (as [`crate::solver::gpu::GpuSolver::write_control`]).
+    pub fn write_control(&self, gpu: &GpuContext, control: &Control) {
+        let (offset, size) = self.control_range();
+        if control.body_f.is_empty() {
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            enc.clear_buffer(&self.scratch, offset, Some(size));
+            gpu.queue.submit([enc.finish()]);
+            return;
+        }
+        assert_eq!(control.body_f.len() as u64 * 32, size, "Control::body_f shape [world_count * body_count]");
+        let f: Vec<[f32; 4]> =
+            control.body_f.iter().flat_map(|w| [w[0].extend(0.0).to_array(), w[1].extend(0.0).to_array()]).collect();
+        gpu.queue.write_buffer(&self.scratch, offset, bytemuck::cast_slice(&f));
+    }
+
+    fn pass_offset(&self, slot: u32) -> u32 {
+        (slot as u64 * self.pass_stride) as u32
+    }
+
+    /// Records one frame: [`encode_handling`](Self::encode_handling), then [`encode_solve`](Self::encode_solve).
+    pub fn encode(&self, enc: &mut wgpu::CommandEncoder) {
+        self.encode_handling(enc);
+        self.encode_solve(enc);
+    }
+
+    fn set(&self, pass: &mut wgpu::ComputePass, k: &Kernel, groups: &[wgpu::BindGroup], slot: Option<u32>) {
+        pass.set_pipeline(&k.pipeline);
+        for (i, g) in groups.iter().enumerate() {
+            // Group 3 is the per-dispatch parameters (a dynamic offset into the pass slots).
+            let offsets = [self.pass_offset(slot.unwrap_or(0))];
+            pass.set_bind_group(i as u32, g, if i == 3 { &offsets[..] } else { &[] });
+        }
+    }
+
+    /// Contact handling (paper Table I: pair finding, generation, reduction): near pairs, then contacts.
+    pub fn encode_handling(&self, enc: &mut wgpu::CommandEncoder) {
+        enc.clear_buffer(&self.args, 0, None);
+        let mut pass = enc
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("crowd-handling"), timestamp_writes: None });
+        let (wc, bodies_x) = (self.world_count, self.body_count.div_ceil(64));
+        let ng = &self.near_groups;
+        let grid = [
+            (self.cfg.max_pairs.div_ceil(64), wc), // keep_keys
+            (bodies_x, wc),                        // near_count
+            (wc, 1),                               // near_scan
+            (bodies_x, wc),                        // near_emit
+        ];
+        for (k, (x, y)) in self.near[..4].iter().zip(grid) {
+            self.set(&mut pass, k, ng, None);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        let cg = &self.contact_groups;
+        self.set(&mut pass, &self.contacts[0], cg, None);
+        pass.dispatch_workgroups_indirect(&self.args, A_GENERATE * 4);
+        self.set(&mut pass, &self.merge, &self.merge_groups, None);
+        pass.dispatch_workgroups_indirect(&self.args, A_MERGE * 4);
+        self.set(&mut pass, &self.contacts[1], cg, None);
+        pass.dispatch_workgroups(wc.div_ceil(64), 1, 1);
+    }
+
+    /// Contact solution (Table I: constraint preparation, iterative solution, integration): the colouring,
+    /// the rows, the coloured sweeps and integration, the status.
+    pub fn encode_solve(&self, enc: &mut wgpu::CommandEncoder) {
+        let mut pass =
+            enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("crowd-solve"), timestamp_writes: None });
+        let (wc, bodies_x) = (self.world_count, self.body_count.div_ceil(64));
+        let ng = &self.near_groups;
+        self.set(&mut pass, &self.near[4], ng, None);
+        pass.dispatch_workgroups(bodies_x, wc, 1);
+        for r in 0..self.cfg.colour_rounds {
+            self.set(&mut pass, &self.near[5], &self.round_groups, Some(r));
+            pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
+        }
+        self.set(&mut pass, &self.near[6], ng, None);
+        pass.dispatch_workgroups(wc.div_ceil(64), 1, 1);
+        let sg = &self.solve_groups;
+        self.set(&mut pass, &self.solve[0], sg, None);
+        pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
+        let sweep = |pass: &mut wgpu::ComputePass, phase: u32| {
+            for c in 0..self.cfg.max_colours {
+                self.set(pass, &self.solve[2], sg, Some(self.cfg.colour_rounds + phase * 32 + c));
+                pass.dispatch_workgroups_indirect(&self.args, (A_COLOUR + 3 * c as u64) * 4);
+            }
+        };
+        for _ in 0..self.solver.substeps {
+            self.set(&mut pass, &self.solve[1], sg, None);
+            pass.dispatch_workgroups(bodies_x, wc, 1);
+            sweep(&mut pass, 0);
+            for it in 0..self.solver.pos_iters {
+                sweep(&mut pass, if it == 0 { 1 } else { 2 });
+            }
+            self.set(&mut pass, &self.solve[3], sg, None);
+            pass.dispatch_workgroups(bodies_x, wc, 1);
+            for it in 0..self.solver.vel_iters {
+                sweep(&mut pass, if it == 0 { 3 } else { 4 });
+            }
+        }
+        self.set(&mut pass, &self.solve[4], sg, None);
+        pass.dispatch_workgroups(wc.div_ceil(64), 1, 1);
+    }
+
+    /// Encodes and submits one frame.
+    pub fn submit_frame(&self, gpu: &GpuContext) {
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        self.encode(&mut enc);
+        gpu.queue.submit([enc.finish()]);
+    }
+
+    /// Poses, velocities and per world whether it is ok (stepped, finite, below max_speed); waits.
+    pub fn read_state(&self, gpu: &GpuContext) -> (BodyState, Vec<bool>) {
+        let q: Vec<TransformGpu> = gpu.read_buffer(&self.body_q);
+        let qd: Vec<[f32; 4]> = gpu.read_buffer(&self.body_qd);
+        let status: Vec<[f32; 4]> = gpu.read_buffer_prefix(&self.scratch, self.world_count as u64 * 16);
+        let body_qd = (0..q.len())
+            .map(|i| [glam::Vec4::from_array(qd[2 * i]).truncate(), glam::Vec4::from_array(qd[2 * i + 1]).truncate()])
+            .collect();
+        (BodyState { body_q: q, body_qd }, status.iter().map(|s| s[0] == 1.0).collect())
+    }
+
+    fn meta_words(&self, gpu: &GpuContext) -> Vec<u32> {
+        gpu.read_buffer(&self.meta)
+    }
+
+    fn world_meta<'a>(&self, meta: &'a [u32], w: u32) -> &'a [u32] {
+        let s = self.params.meta_stride as usize;
+        &meta[w as usize * s..(w as usize + 1) * s]
+    }
+
+    /// Offset of the per-pair arrays in a world's meta block, and of array `k` among them.
+    fn pair_array(&self, k: u32) -> usize {
+        (M_HEAD + 4 * self.body_count + k * self.cfg.max_pairs) as usize
+    }
+
+    /// Each world's last frame: its near pairs, colours and flags (waits; for tests and reports).
+    pub fn read_frames(&self, gpu: &GpuContext) -> Vec<CrowdFrame> {
+        let meta = self.meta_words(gpu);
+        let pairs: Vec<PairGpu> = gpu.read_buffer(&self.crowd_pairs);
+        (0..self.world_count)
+            .map(|w| {
+                let m = self.world_meta(&meta, w);
+                let count = m[M_COUNT] as usize;
+                let base = (w * self.cfg.max_pairs) as usize;
+                let colour = &m[self.pair_array(1)..];
+                CrowdFrame {
+                    pairs: (0..count)
+                        .map(|e| {
+                            let p = &pairs[base + e];
+                            NearPair { a: p.body_a, key: p.job_first, b: p.body_b, template: p._pad[0].to_bits() }
+                        })
+                        .collect(),
+                    colours: (0..count)
+                        .map(|e| if colour[e] == UNCOLOURED { COLOUR_NONE } else { colour[e] & 0xff })
+                        .collect(),
+                    colour_count: m[M_COLOURS],
+                    flags: m[M_FLAGS],
+                }
+            })
+            .collect()
+    }
+
+    /// Each world's near pairs with their reduced patches of the last frame (waits; for tests and reports).
+    /// The crowd kernels compute no per-contact normals: each contact carries its patch's normal.
+    pub fn read_patches(&self, gpu: &GpuContext) -> Vec<Vec<(NearPair, Vec<Patch>)>> {
+        let frames = self.read_frames(gpu);
+        let meta = self.meta_words(gpu);
+        let raw: Vec<PatchGpu> = gpu.read_buffer(&self.patches);
+        let mp = self.contact.max_patches as usize;
+        frames
+            .into_iter()
+            .enumerate()
+            .map(|(w, f)| {
+                let m = self.world_meta(&meta, w as u32);
+                let pc = &m[self.pair_array(5)..];
+                let base = w * self.cfg.max_pairs as usize;
+                f.pairs
+                    .iter()
+                    .enumerate()
+                    .map(|(e, np)| {
+                        let first = (base + e) * mp;
+                        let ps = &raw[first..first + pc[e] as usize];
+                        (*np, to_patches(ps, |i, _| Vec3::from_slice(&ps[i].normal[..3])))
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// Each world's contact figures of the last frame (waits; for reports).
+    pub fn read_stats(&self, gpu: &GpuContext) -> Vec<CrowdStats> {
+        let meta = self.meta_words(gpu);
+        let patches: Vec<PatchGpu> = gpu.read_buffer(&self.patches);
+        let mp = self.contact.max_patches as usize;
+        (0..self.world_count)
+            .map(|w| {
+                let m = self.world_meta(&meta, w);
+                let count = m[M_COUNT] as usize;
+                let pc = &m[self.pair_array(5)..self.pair_array(5) + count];
+                let cand = &m[self.pair_array(6)..self.pair_array(6) + count];
+                let base = (w * self.cfg.max_pairs) as usize;
+                let contacts = (0..count)
+                    .map(|e| {
+                        patches[(base + e) * mp..(base + e) * mp + pc[e] as usize]
+                            .iter()
+                            .map(|p| p.slots.iter().filter(|s| s[3] < 1e38).count() as u32)
+                            .sum::<u32>()
+                    })
+                    .sum();
+                CrowdStats {
+                    pairs: count as u32,
+                    touching_pairs: pc.iter().filter(|&&c| c > 0).count() as u32,
+                    candidates: cand.iter().map(|&c| c as u64).sum(),
+                    patches: m[M_PATCHES],
+                    contacts,
+                    colours: m[M_COLOURS],
+                    flags: m[M_FLAGS],
+                }
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crowd_shaders_validate_with_naga() {
+        for (name, body) in
+            [("near", NEAR_WGSL), ("contacts", CONTACTS_WGSL), ("merge", MERGE_WGSL), ("solve", SOLVE_WGSL)]
+        {
+            for (max_patches, wg) in [(16, 64), (64, 256)] {
+                for revolved in [false, true] {
+                    let src =
+                        shader_source_wg(&format!("{CROWD_COMMON}\n{body}"), max_patches, wg, SdfKinds { revolved });
+                    if let Err(e) = crate::contact::shader_tests::validate(&src) {
+                        panic!(
+                            "crowd {name}.wgsl, max_patches {max_patches}, workgroup {wg}, revolved {revolved}:\n{e}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,501 @@
+//! Many bodies in one world: the paper's piles (section III-D: 1024 nuts, bowls or toruses falling into a
+//! pile in one environment). The fixed pair list and one-invocation-per-world solver of
+//! [`crate::contact::ContactPipeline`] and [`crate::solver::gpu::GpuSolver`] suit thousands of small
+//! worlds; a world of N bodies has N (N - 1) / 2 candidate pairs and one long serial solve. This module
+//! builds the world's work every frame instead, all on the GPU (the host records dispatches only):
+//!
+//! 1. **Near pairs** (`near.wgsl`): for every body, the bodies and static shapes whose bounding spheres
+//!    come within the contact offset (a plane tests the sphere against its half-space), counted per
+//!    body, prefix-summed and written as a compact list sorted by (body a, body b), each entry a
+//!    [`PairGpu`] copied from the pair's template ([`CrowdModel`]) with its bodies filled in. The order
+//!    does not depend on thread timing, so frames are bitwise reproducible.
+//! 2. **Contacts** (`contacts.wgsl`): generation and the two-level reduction of
+//!    [`crate::contact`] on the near pairs (indirect dispatches sized by the list).
+//! 3. **Graph colouring** (`near.wgsl`): two pairs that share a dynamic body cannot be solved at once.
+//!    Jones and Plassmann's parallel colouring (1993, "A parallel graph coloring heuristic"): in each
+//!    round every uncoloured pair whose priority (a hash of its two bodies) beats that of all its
+//!    uncoloured neighbours takes the lowest colour its coloured neighbours leave free. Neighbours that
+//!    decide in the same round never share a body, so the result is the same as a sequential run of
+//!    the rounds, and the CPU twin reproduces it exactly.
+//! 4. **Solve** (`solve.wgsl`): the Gauss-Seidel step of [`crate::solver`] (same rows, warm start, patch
+//!    passes, integration) with the sweep over the pairs cut into one dispatch per colour: the pairs of a
+//!    colour touch disjoint bodies and run in parallel, the colours run in order. This is exactly a
+//!    sequential Gauss-Seidel sweep over the pairs sorted by colour, which is what the CPU twin runs
+//!    ([`crate::solver::step_cpu`] on the pairs in that order). Warm starting across frames finds last
+//!    frame's entry of the same body pair by binary search in last frame's sorted keys.
+//!
+//! A world whose near pairs exceed [`CrowdConfig::max_pairs`], whose colouring needs more than
+//! [`CrowdConfig::max_colours`] colours or more than [`CrowdConfig::colour_rounds`] rounds, or whose
+//! patches exceed [`CrowdConfig::max_patches_per_world`] is flagged and left as it was for that frame
+//! (never stepped with contacts missing); [`CrowdFrame::flags`] says which.
+
+pub mod gpu;
+
+use crate::contact::generate::{pair_far_cpu, shape_world, Xf};
+use crate::contact::model::{FlatModel, JobGpu, PairGpu, NO_BODY};
+use crate::contact::{contacts_cpu, ContactConfig, ContactModel, PairSpec, TransformGpu};
+use crate::error::{EngineError, Result};
+use crate::solver::{step_cpu, BodyModel, BodyState, Control, SolverConfig, WarmStart};
+use glam::Vec3;
+
+/// No template for a pair of classes (the pair never collides).
+pub const NO_RULE: u32 = u32::MAX;
+/// Colour word of an uncoloured pair.
+const UNCOLOURED: u32 = u32::MAX;
+/// Colour index of a pair that found no free colour below `max_colours`.
+const COLOUR_NONE: u32 = 255;
+
+/// [`CrowdFrame::flags`]: more near pairs than [`CrowdConfig::max_pairs`].
+pub const FLAG_PAIRS: u32 = 1;
+/// A pair needed a colour beyond [`CrowdConfig::max_colours`].
+pub const FLAG_COLOURS: u32 = 2;
+/// Pairs still uncoloured after [`CrowdConfig::colour_rounds`] rounds.
+pub const FLAG_ROUNDS: u32 = 4;
+/// More patches than [`CrowdConfig::max_patches_per_world`].
+pub const FLAG_PATCHES: u32 = 8;
+
+/// The shapes of a many-body world: each body has a shape class, and a template pair per pair of
+/// classes (and per static shape and class) says how two such shapes collide.
+#[derive(Clone, Debug)]
+pub struct CrowdModel {
+    /// Bodies per world.
+    pub body_count: u32,
+    /// Shape class of each body, shape [body_count].
+    pub body_class: Vec<u32>,
+    pub class_count: u32,
+    /// Pair templates: the query shape on body a and the SDF shape on body b with their poses on the
+    /// bodies, offset and friction; their body fields are ignored (each near pair sets its own), except
+    /// that a static template's SDF shape is fixed in the world (`b_pose` in world coordinates).
+    pub templates: Vec<PairSpec>,
+    /// Template for bodies i < j of classes (ci, cj) at [ci * class_count + cj], or [`NO_RULE`].
+    pub body_rule: Vec<u32>,
+    /// Static shapes (a ground plane, a table), each colliding with every body of the classes its
+    /// rule names: template at [s * class_count + c], or [`NO_RULE`].
+    pub static_rule: Vec<u32>,
+    pub static_count: u32,
+}
+
+impl CrowdModel {
+    /// `body_count` bodies of one part: every two collide by `body_pair`, and each collides with each of
+    /// `statics` (templates whose SDF shape is fixed in the world).
+    pub fn uniform(body_count: u32, body_pair: PairSpec, statics: Vec<PairSpec>) -> Self {
+        let static_count = statics.len() as u32;
+        let mut templates = vec![body_pair];
+        templates.extend(statics);
+        CrowdModel {
+            body_count,
+            body_class: vec![0; body_count as usize],
+            class_count: 1,
+            templates,
+            body_rule: vec![0],
+            static_rule: (1..=static_count).collect(),
+            static_count,
+        }
+    }
+
+    /// Checks the tables' shapes and indices, naming the field.
+    pub fn validate(&self) -> Result<()> {
+        let bad =
+            |field: &'static str, value: String, expected: String| Err(EngineError::Config { field, value, expected });
+        if self.body_count == 0 {
+            return bad("body_count", "0".into(), "at least 1 body".into());
+        }
+        if self.body_class.len() != self.body_count as usize {
+            return bad(
+                "body_class",
+                format!("{} entries", self.body_class.len()),
+                format!("one per body ({})", self.body_count),
+            );
+        }
+        if let Some((i, c)) = self.body_class.iter().enumerate().find(|(_, &c)| c >= self.class_count) {
+            return bad(
+                "body_class",
+                format!("{c} (body {i})"),
+                format!("a class below class_count = {}", self.class_count),
+            );
+        }
+        let n_t = self.templates.len() as u32;
+        for (field, table, len) in [
+            ("body_rule", &self.body_rule, self.class_count * self.class_count),
+            ("static_rule", &self.static_rule, self.static_count * self.class_count),
+        ] {
+            if table.len() != len as usize {
+                return bad(field, format!("{} entries", table.len()), format!("{len} (see CrowdModel)"));
+            }
+            if let Some(t) = table.iter().find(|&&t| t != NO_RULE && t >= n_t) {
+                return bad(field, t.to_string(), format!("a template index below {n_t} or NO_RULE"));
+            }
+        }
+        Ok(())
+    }
+
+    /// The templates flattened for the GPU (jobs of `chunk` triangles each); body fields are placeholders.
+    pub fn flatten(&self, chunk: u32) -> Result<FlatModel> {
+        let statics: Vec<bool> = (0..self.templates.len() as u32).map(|t| self.static_rule.contains(&t)).collect();
+        let pairs = self
+            .templates
+            .iter()
+            .zip(&statics)
+            .map(|(p, &is_static)| PairSpec { body_a: 0, body_b: if is_static { NO_BODY } else { 0 }, ..p.clone() })
+            .collect();
+        ContactModel { body_count: self.body_count, pairs }.flatten(chunk)
+    }
+}
+
+/// Capacities of a many-body world (per world).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CrowdConfig {
+    /// Near pairs (body-body and body-static) a world may hold.
+    pub max_pairs: u32,
+    /// Colours the solver may use (at most 32; a body with d near pairs needs at least d).
+    pub max_colours: u32,
+    /// Colouring rounds per frame.
+    pub colour_rounds: u32,
+    /// Patches (of all near pairs together) a world may hold: the solver's rows are allocated per patch.
+    pub max_patches_per_world: u32,
+}
+
+impl CrowdConfig {
+    /// Room for `bodies` bodies with about 8 near pairs each and 8 patches per pair.
+    pub fn for_bodies(bodies: u32) -> Self {
+        let max_pairs = (8 * bodies).max(64);
+        CrowdConfig { max_pairs, max_colours: 32, colour_rounds: 48, max_patches_per_world: 8 * max_pairs }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        let bad = |field: &'static str, value: u32, expected: &str| {
+            Err(EngineError::Config { field, value: value.to_string(), expected: expected.into() })
+        };
+        if self.max_pairs == 0 || self.max_pairs > 30_000 {
+            // The colour sort walks a world's pairs twice in one invocation (lavapipe's 65535 loop passes).
+            return bad("max_pairs", self.max_pairs, "1..=30000 near pairs per world");
+        }
+        if self.max_colours == 0 || self.max_colours > 32 {
+            return bad("max_colours", self.max_colours, "1..=32 (one bit per colour)");
+        }
+        if self.colour_rounds == 0 || self.colour_rounds > 1024 {
+            return bad("colour_rounds", self.colour_rounds, "1..=1024");
+        }
+        if self.max_patches_per_world == 0 {
+            return bad("max_patches_per_world", 0, "at least 1");
+        }
+        Ok(())
+    }
+}
+
+/// One near pair: its bodies (b = [`NO_BODY`] for a static shape), its sort key for b and its template.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct NearPair {
+    pub a: u32,
+    /// b for a body, [`STATIC_KEY`] + s for static shape s: the list is sorted by (a, key).
+    pub key: u32,
+    pub b: u32,
+    pub template: u32,
+}
+
+/// Sort key of static shape 0 (near.wgsl's STATIC_KEY).
+pub const STATIC_KEY: u32 = 0xffff_0000;
+
+/// What one frame of one world did before its solve.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CrowdFrame {
+    /// Near pairs in list order (sorted by (a, b)).
+    pub pairs: Vec<NearPair>,
+    /// Colour of each near pair (its index; 255: none found).
+    pub colours: Vec<u32>,
+    /// Colours in use.
+    pub colour_count: u32,
+    /// FLAG_* bits; non-zero: the world was not stepped.
+    pub flags: u32,
+}
+
+/// PCG hash (O'Neill 2014; the variant of Jarzynski and Olano 2020, "Hash functions for GPU rendering").
+pub fn pcg(v: u32) -> u32 {
+    let s = v.wrapping_mul(747796405).wrapping_add(2891336453);
+    let w = ((s >> ((s >> 28) + 4)) ^ s).wrapping_mul(277803737);
+    (w >> 22) ^ w
+}
+
+/// Colouring priority of the pair of bodies (a, b) (near.wgsl's `priority`).
+pub fn priority(a: u32, b: u32) -> u32 {
+    pcg(a ^ pcg(b))
+}
+
+/// Whether the pair's shapes, posed at `world_a` and `world_b`, cannot touch (near.wgsl's `crowd_far`): the
+/// bounding spheres are farther apart than the contact offset, or, for a plane, the query shape's sphere
+/// lies farther than the offset above it.
+pub fn crowd_far_cpu(pair: &PairGpu, world_a: &Xf, world_b: &Xf) -> bool {
+    if pair.sdf_kind == 1 {
+        let c = world_b.inv().point(world_a.point(Vec3::from_slice(&pair.a_bound[..3])));
+        return c.z - pair.a_bound[3] > pair.contact_offset;
+    }
+    pair_far_cpu(pair, world_a, world_b)
+}
+
+/// The templates and tables the kernels read, and the CPU twin's copy of them.
+#[derive(Clone, Debug)]
+pub struct CrowdFlat {
+    pub model: CrowdModel,
+    /// Flattened templates (pairs, jobs, triangles, SDF values).
+    pub flat: FlatModel,
+    /// Triangles per job.
+    pub chunk: u32,
+    /// Jobs per near pair (the most any template needs).
+    pub jobs_per_pair: u32,
+}
+
+impl CrowdFlat {
+    pub fn new(model: &CrowdModel, contact: &ContactConfig) -> Result<Self> {
+        model.validate()?;
+        contact.validate()?;
+        let longest = model.templates.iter().map(|p| p.query.triangles.len() as u32).max().unwrap_or(0);
+        // A world of many pairs fills the device with pairs, so jobs are as long as the loop budget allows.
+        let chunk = if contact.chunk_triangles > 0 {
+            contact.chunk_triangles
+        } else {
+            longest.next_multiple_of(256).clamp(256, contact.max_chunk_triangles().max(256))
+        };
+        let flat = model.flatten(chunk)?;
+        let jobs_per_pair = flat.pairs.iter().map(|p| p.job_count).max().unwrap_or(1).max(1);
+        if chunk > contact.max_chunk_triangles() || jobs_per_pair > contact.max_jobs_per_pair() {
+            return Err(EngineError::Config {
+                field: "chunk_triangles",
+                value: chunk.to_string(),
+                expected: format!(
+                    "jobs of at most {} triangles and at most {} jobs per pair (lavapipe's loop limit; the largest template has {longest} query triangles)",
+                    contact.max_chunk_triangles(),
+                    contact.max_jobs_per_pair()
+                ),
+            });
+        }
+        Ok(CrowdFlat { model: model.clone(), flat, chunk, jobs_per_pair })
+    }
+
+    fn class(&self, body: u32) -> u32 {
+        self.model.body_class[body as usize]
+    }
+
+    /// The near pairs of world `world` at poses `body_q` (all worlds), in list order, and whether more than
+    /// `max_pairs` were near (the list is then cut at `max_pairs`).
+    pub fn near_pairs(&self, body_q: &[Xf], world: u32, max_pairs: u32) -> (Vec<NearPair>, bool) {
+        let m = &self.model;
+        let n = m.body_count;
+        let mut out = Vec::new();
+        let mut total = 0u32;
+        for i in 0..n {
+            for j in i + 1..n {
+                let t = m.body_rule[(self.class(i) * m.class_count + self.class(j)) as usize];
+                if t != NO_RULE && self.near(t, i, j, body_q, world) {
+                    total += 1;
+                    out.push(NearPair { a: i, key: j, b: j, template: t });
+                }
+            }
+            for s in 0..m.static_count {
+                let t = m.static_rule[(s * m.class_count + self.class(i)) as usize];
+                if t != NO_RULE && self.near(t, i, NO_BODY, body_q, world) {
+                    total += 1;
+                    out.push(NearPair { a: i, key: STATIC_KEY + s, b: NO_BODY, template: t });
+                }
+            }
+        }
+        out.truncate(max_pairs as usize);
+        (out, total > max_pairs)
+    }
+
+    fn near(&self, t: u32, a: u32, b: u32, body_q: &[Xf], world: u32) -> bool {
+        let p = &self.flat.pairs[t as usize];
+        let n = self.model.body_count;
+        let wa = shape_world(body_q, n, world, a, p.a_pos, p.a_rot);
+        let wb = shape_world(body_q, n, world, b, p.b_pos, p.b_rot);
+        !crowd_far_cpu(p, &wa, &wb)
+    }
+
+    /// The near pair's record: its template with its bodies filled in (near.wgsl's `near_emit`).
+    pub fn pair_record(&self, np: &NearPair) -> PairGpu {
+        let mut p = PairGpu { body_a: np.a, body_b: np.b, job_first: np.key, ..self.flat.pairs[np.template as usize] };
+        p._pad[0] = f32::from_bits(np.template);
+        p
+    }
+}
+
+/// Jones-Plassmann colouring of near pairs (near.wgsl's `colour_round` and `colour_sort`): each pair's
+/// colour index, the colours in use, and FLAG_COLOURS / FLAG_ROUNDS.
+pub fn colour_pairs(pairs: &[NearPair], body_count: u32, max_colours: u32, rounds: u32) -> (Vec<u32>, u32, u32) {
+    let n = pairs.len();
+    let mut incident: Vec<Vec<usize>> = vec![Vec::new(); body_count as usize];
+    for (e, p) in pairs.iter().enumerate() {
+        incident[p.a as usize].push(e);
+        if p.b != NO_BODY {
+            incident[p.b as usize].push(e);
+        }
+    }
+    let prio: Vec<u32> = pairs.iter().map(|p| priority(p.a, p.b)).collect();
+    let mut colour = vec![UNCOLOURED; n];
+    let mut flags = 0;
+    for r in 0..rounds {
+        let start = colour.clone();
+        for e in 0..n {
+            if start[e] != UNCOLOURED {
+                continue;
+            }
+            let mut used = 0u32;
+            let mut blocked = false;
+            for x in [pairs[e].a, pairs[e].b] {
+                if x == NO_BODY {
+                    continue;
+                }
+                for &f in &incident[x as usize] {
+                    if f == e {
+                        continue;
+                    }
+                    if start[f] == UNCOLOURED {
+                        blocked |= (prio[f], f) > (prio[e], e);
+                    } else if start[f] & 0xff < 32 {
+                        used |= 1 << (start[f] & 0xff);
+                    }
+                }
+            }
+            if !blocked {
+                let c = (!used).trailing_zeros();
+                colour[e] = (r << 8) | if c < max_colours { c } else { COLOUR_NONE };
+                if c >= max_colours {
+                    flags |= FLAG_COLOURS;
+                }
+            }
+        }
+    }
+    if colour.contains(&UNCOLOURED) {
+        flags |= FLAG_ROUNDS;
+    }
+    let colours: Vec<u32> = colour.iter().map(|&c| if c == UNCOLOURED { COLOUR_NONE } else { c & 0xff }).collect();
+    let count = colours.iter().filter(|&&c| c < max_colours).map(|&c| c + 1).max().unwrap_or(0);
+    (colours, count, flags)
+}
+
+/// The CPU reference of [`gpu::CrowdPipeline`]: the same near pairs, colours, contacts and a Gauss-Seidel
+/// step over the pairs in colour order, world by world.
+pub struct CrowdCpu {
+    pub flat: CrowdFlat,
+    pub cfg: CrowdConfig,
+    pub contact: ContactConfig,
+    pub solver: SolverConfig,
+    pub bodies: BodyModel,
+    /// Per world: last frame's pairs in solve order and their rows.
+    warm: Vec<(Vec<NearPair>, WarmStart)>,
+    /// A model of one world's near pairs, rebuilt every frame (triangles and SDF values set once).
+    world_flat: FlatModel,
+}
+
+impl CrowdCpu {
+    pub fn new(
+        model: &CrowdModel,
+        bodies: &BodyModel,
+        cfg: &CrowdConfig,
+        contact: &ContactConfig,
+        solver: &SolverConfig,
+    ) -> Result<Self> {
+        cfg.validate()?;
+        solver.validate()?;
+        bodies.validate()?;
+        let flat = CrowdFlat::new(model, contact)?;
+        let world_flat = FlatModel {
+            pairs: Vec::new(),
+            jobs: Vec::new(),
+            tri_verts: flat.flat.tri_verts.clone(),
+            sdf_values: flat.flat.sdf_values.clone(),
+        };
+        Ok(CrowdCpu {
+            flat,
+            cfg: cfg.clone(),
+            contact: contact.clone(),
+            solver: solver.clone(),
+            bodies: bodies.clone(),
+            warm: Vec::new(),
+            world_flat,
+        })
+    }
+
+    /// Forgets the warm-start impulses of every world.
+    pub fn forget_warm_start(&mut self) {
+        self.warm.clear();
+    }
+
+    /// Steps every world of `state` by one frame; returns per world the frame's pairs, colours and flags,
+    /// and whether the world is ok (stepped, finite, below max_speed).
+    pub fn step(&mut self, state: &mut BodyState, control: &Control) -> Vec<(CrowdFrame, bool)> {
+        let n = self.flat.model.body_count as usize;
+        let world_count = state.body_q.len() / n;
+        self.warm.resize_with(world_count, Default::default);
+        let xf: Vec<Xf> = state.body_q.iter().map(|t| t.xf()).collect();
+        let mut out = Vec::with_capacity(world_count);
+        for w in 0..world_count {
+            let (pairs, over) = self.flat.near_pairs(&xf, w as u32, self.cfg.max_pairs);
+            // The GPU does not colour an overfull list (the world is not stepped).
+            let (colours, colour_count, flags) = if over {
+                (vec![COLOUR_NONE; pairs.len()], 0, FLAG_PAIRS)
+            } else {
+                colour_pairs(&pairs, n as u32, self.cfg.max_colours, self.cfg.colour_rounds)
+            };
+            // Solve order: by colour, then list order (the GPU's colour lists).
+            let mut order: Vec<usize> = (0..pairs.len()).filter(|&e| colours[e] < self.cfg.max_colours).collect();
+            order.sort_by_key(|&e| (colours[e], e));
+            let solve_pairs: Vec<NearPair> = order.iter().map(|&e| pairs[e]).collect();
+            let mut frame = CrowdFrame { pairs, colours, colour_count, flags };
+            self.world_flat.pairs.clear();
+            self.world_flat.jobs.clear();
+            for (k, np) in solve_pairs.iter().enumerate() {
+                let t = &self.flat.flat.pairs[np.template as usize];
+                let job_first = self.world_flat.jobs.len() as u32;
+                for j in 0..t.job_count {
+                    let first = j * self.flat.chunk;
+                    self.world_flat.jobs.push(JobGpu {
+                        pair: k as u32,
+                        tri_first: t.tri_first + first,
+                        tri_count: self.flat.chunk.min(t.tri_count - first),
+                        slot: j,
+                    });
+                }
+                self.world_flat.pairs.push(PairGpu { job_first, ..self.flat.pair_record(np) });
+            }
+            let range = w * n..(w + 1) * n;
+            let contacts = contacts_cpu(&self.world_flat, n as u32, 1, &state.body_q[range.clone()], &self.contact);
+            let patches: usize = contacts.patches.iter().map(|p| p.len()).sum();
+            if patches > self.cfg.max_patches_per_world as usize {
+                frame.flags |= FLAG_PATCHES;
+            }
+            let (old_pairs, mut warm) = std::mem::take(&mut self.warm[w]);
+            if frame.flags != 0 {
+                out.push((frame, false));
+                continue;
+            }
+            // Last frame's rows move to their pair's new place (the GPU finds them by binary search).
+            let place: std::collections::HashMap<(u32, u32), usize> =
+                solve_pairs.iter().enumerate().map(|(k, p)| (key(p), k)).collect();
+            warm.remap_pairs(|old| place.get(&key(&old_pairs[old])).copied());
+            let mut ws = BodyState {
+                body_q: state.body_q[range.clone()].to_vec(),
+                body_qd: state.body_qd[range.clone()].to_vec(),
+            };
+            let cw = if control.body_f.is_empty() {
+                Control::default()
+            } else {
+                Control { body_f: control.body_f[range.clone()].to_vec() }
+            };
+            let ok = step_cpu(&self.bodies, &mut ws, &contacts, &self.world_flat, &self.solver, &cw, &mut warm)[0];
+            state.body_q[range.clone()].copy_from_slice(&ws.body_q);
+            state.body_qd[range].copy_from_slice(&ws.body_qd);
+            self.warm[w] = (solve_pairs, warm);
+            out.push((frame, ok));
+        }
+        out
+    }
+}
+
+fn key(p: &NearPair) -> (u32, u32) {
+    (p.a, p.key)
+}
+
+/// Poses of body `i` of world `w` in a flat state (a convenience for callers).
+pub fn pose(state: &BodyState, body_count: u32, w: u32, i: u32) -> TransformGpu {
+    state.body_q[(w * body_count + i) as usize]
+}

@@ -1,0 +1,146 @@
+// The Gauss-Seidel step of a many-body world, one dispatch per colour (see crowd/mod.rs): the rows, warm
+// start, patch passes and integration of solver/solver_core.wgsl, with the pairs of one colour (disjoint
+// bodies) solved in parallel. Prepended: contact/common.wgsl, crowd/crowd_common.wgsl; appended:
+// solver_core.wgsl, sdf_sample and the analytic SDFs. Per frame: crowd_build_rows, then per substep
+// crowd_velocities, crowd_pass (warm start) per colour, crowd_pass per colour x pos_iters, crowd_positions,
+// crowd_pass per colour x vel_iters; crowd_finish.
+//
+// solver_scratch: status per world, wrenches per body (as solver.wgsl), then two blocks of rows, used by
+// alternate frames (frame & 1), each [world_count * patch_budget patches * 4 rows]: a frame's rows are
+// built from last frame's, which stay in the other block.
+
+@group(0) @binding(0) var<uniform> sp: SolverParams;
+@group(0) @binding(1) var<uniform> cp: CrowdParams;
+@group(0) @binding(2) var<storage, read> sdf_values: array<u32>;
+@group(0) @binding(3) var<storage, read> bodies: array<Body>;
+@group(1) @binding(0) var<storage, read> pairs: array<Pair>;
+@group(1) @binding(1) var<storage, read> patches: array<PatchOut>;
+@group(1) @binding(2) var<storage, read> crowd_meta: array<u32>;
+@group(2) @binding(0) var<storage, read_write> body_q: array<Transform>;
+@group(2) @binding(1) var<storage, read_write> body_qd: array<vec4<f32>>;
+@group(2) @binding(2) var<storage, read_write> solver_scratch: array<vec4<f32>>;
+@group(3) @binding(0) var<uniform> pp: PassParams;
+
+fn crowd_row(par: u32, w: u32, slot: u32) -> u32 {
+    return rows_base() + ((par * sp.world_count + w) * cp.patch_budget + slot) * 4u * ROW;
+}
+
+fn ready(w: u32) -> bool {
+    return crowd_meta[meta_base(w) + M_FLAGS] == 0u;
+}
+
+fn frame_of(w: u32) -> u32 {
+    return bitcast<u32>(solver_scratch[w].w) + 1u;
+}
+
+// Last frame's list index of the pair (a, key), NONE if it was not near then.
+fn find_old(w: u32, a: u32, key: u32) -> u32 {
+    let n = crowd_meta[meta_base(w) + M_OLD_COUNT];
+    var lo = 0u;
+    var hi = n;
+    loop {
+        if (lo >= hi) {
+            break;
+        }
+        let mid = (lo + hi) / 2u;
+        let ma = crowd_meta[m_old_a(w) + mid];
+        let mk = crowd_meta[m_old_b(w) + mid];
+        if (ma < a || (ma == a && mk < key)) {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    if (lo < n && crowd_meta[m_old_a(w) + lo] == a && crowd_meta[m_old_b(w) + lo] == key) {
+        return lo;
+    }
+    return NONE;
+}
+
+@compute @workgroup_size(64)
+fn crowd_build_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let e = gid.x;
+    let w = gid.y;
+    if (e >= crowd_meta[meta_base(w) + M_COUNT] || !ready(w)) {
+        return;
+    }
+    let frame = frame_of(w);
+    let par = frame & 1u;
+    let g = w * cp.cap + e;
+    let pair = pairs[g];
+    let count = crowd_meta[m_patch_count(w) + e];
+    let first = crowd_meta[m_row_first(w) + e];
+    let old = find_old(w, pair.body_a, pair.job_first);
+    let va = view(w, pair.body_a);
+    let vb = view(w, pair.body_b);
+    for (var i = 0u; i < count; i++) {
+        let g0 = crowd_row(par, w, first + i);
+        var old0 = g0;
+        var old_tag = NO_MATCH;
+        if (old != NONE) {
+            let oslot = crowd_meta[m_old_row_first(w) + old] + i;
+            if (oslot < cp.patch_budget) {
+                old0 = crowd_row(1u - par, w, oslot);
+                old_tag = w * cp.cap + old;
+            }
+        }
+        build_patch_rows(g0, old0, g, old_tag, pair, va, vb, patches[g * MAX_PATCHES + i], frame);
+    }
+}
+
+@compute @workgroup_size(64)
+fn crowd_velocities(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let b = gid.x;
+    let w = gid.y;
+    if (b < sp.body_count && ready(w)) {
+        integrate_velocity(w * sp.body_count, b, sp.dt / f32(sp.substeps));
+    }
+}
+
+@compute @workgroup_size(64)
+fn crowd_positions(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let b = gid.x;
+    let w = gid.y;
+    if (b < sp.body_count && ready(w)) {
+        integrate_position(w * sp.body_count, b, sp.dt / f32(sp.substeps));
+    }
+}
+
+// One pass over the pairs of colour pp.index: the warm start (pp.warm) or a Gauss-Seidel sweep.
+@compute @workgroup_size(64)
+fn crowd_pass(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = gid.x;
+    let w = gid.y;
+    let c = pp.index;
+    let start = crowd_meta[meta_base(w) + M_COLOUR_OFF + c];
+    let end = crowd_meta[meta_base(w) + M_COLOUR_OFF + c + 1u];
+    if (start + k >= end || !ready(w)) {
+        return;
+    }
+    let e = crowd_meta[m_colour_list(w) + start + k];
+    let count = crowd_meta[m_patch_count(w) + e];
+    let first = crowd_meta[m_row_first(w) + e];
+    let par = frame_of(w) & 1u;
+    let h = sp.dt / f32(sp.substeps);
+    for (var i = 0u; i < count; i++) {
+        patch_pass(w, crowd_row(par, w, first + i), h, pp.bias != 0u, pp.warm != 0u, pp.resample != 0u);
+    }
+}
+
+// Per world: status (x: 1 ok, 0 diverged or not stepped; y: near pairs; z: flags) and the frame counter.
+@compute @workgroup_size(64)
+fn crowd_finish(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let w = gid.x;
+    if (w >= sp.world_count) {
+        return;
+    }
+    let frame = frame_of(w);
+    let flags = crowd_meta[meta_base(w) + M_FLAGS];
+    var ok = select(0.0, 1.0, flags == 0u);
+    for (var b = 0u; b < sp.body_count; b++) {
+        if (!body_ok(w * sp.body_count + b)) {
+            ok = 0.0;
+        }
+    }
+    solver_scratch[w] = vec4<f32>(ok, f32(crowd_meta[meta_base(w) + M_COUNT]), f32(flags), bitcast<f32>(frame));
+}
