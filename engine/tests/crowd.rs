@@ -22,7 +22,11 @@ const H: Vec3 = Vec3::new(0.02, 0.015, 0.01);
 /// GPU against the CPU twin, one frame from the same poses (each with its own warm-start rows): the same
 /// sweeps in the same order, so they differ by f32 rounding (fused multiply-adds, lavapipe's
 /// reassociation) only [m], [m/s] (as bench/tests/piles.rs).
-const PARITY_TOL: f32 = 2e-6;
+/// A warm-start match at its distance threshold can go one way on the GPU and the other on the CPU (each
+/// keeps its own rows), and a row then starts from other impulses: measured 2026-12-01 once in 40 frames,
+/// 2.5e-6 m; the median frame agrees to 1.4e-8 m.
+const PARITY_TOL: f32 = 5e-6;
+const PARITY_MEDIAN_TOL: f32 = 2e-7;
 const PARITY_VEL_TOL: f32 = 2e-4;
 
 fn gpu() -> &'static GpuContext {
@@ -174,7 +178,7 @@ fn coloured_gpu_step_matches_the_cpu_twin() {
     let mut cpu = CrowdCpu::new(&model, &bodies, &cfg, &contact, &solver).unwrap();
     pipe.write_state(gpu(), &start);
     let mut state = start.clone();
-    let (mut worst, mut touching) = (0.0f32, 0);
+    let (mut worst, mut touching, mut diffs) = (0.0f32, 0, Vec::new());
     for frame in 0..40 {
         pipe.submit_frame(gpu());
         let (g, ok) = pipe.read_state(gpu());
@@ -186,13 +190,17 @@ fn coloured_gpu_step_matches_the_cpu_twin() {
         touching = touching.max(pipe.read_stats(gpu())[0].touching_pairs);
         let d = max_distance(&g, &state);
         worst = worst.max(d);
+        diffs.push(d);
         assert!(d < PARITY_TOL, "frame {frame}: GPU and CPU twin {d} m apart");
         let dv = g.body_qd.iter().zip(&state.body_qd).map(|(a, b)| (a[0] - b[0]).length()).fold(0.0f32, f32::max);
         assert!(dv < PARITY_VEL_TOL, "frame {frame}: velocities {dv} m/s apart");
         // Each side keeps its own rows for the warm start; the poses are re-synchronised (see above).
         state = g;
     }
-    println!("coloured step: GPU vs CPU twin at most {worst:.3e} m apart per frame over 40 frames; up to {touching} pairs touching");
+    diffs.sort_by(f32::total_cmp);
+    let median = diffs[diffs.len() / 2];
+    println!("coloured step: GPU vs CPU twin at most {worst:.3e} m (median {median:.3e} m) apart per frame over 40 frames; up to {touching} pairs touching");
+    assert!(median < PARITY_MEDIAN_TOL, "median frame {median} m apart");
     assert!(touching >= 12, "the boxes rest on the table and on each other ({touching} pairs touching)");
     // Warm starting is at work: the same frame stepped cold from the same state ends elsewhere.
     let (now, _) = pipe.read_state(gpu());
@@ -259,4 +267,53 @@ fn a_world_over_its_pair_capacity_is_flagged_and_left_as_it_was_while_others_ste
     let (a, _) = alone.read_state(gpu());
     let bits = |q: &[TransformGpu]| -> Vec<u32> { bytemuck::cast_slice::<TransformGpu, u32>(q).to_vec() };
     assert_eq!(bits(&s.body_q[..n as usize]), bits(&a.body_q), "the other world is bitwise unchanged");
+}
+
+/// The job cull (`crowd::job_far_cpu`, contacts.wgsl) drops a run of query triangles on one SDF sample at
+/// the centre of its bounding sphere; it must never drop one that has a candidate. Two boxes meshed with
+/// 2 mm triangles (spatially ordered into jobs of 256) and a 32-resolution grid, 300 random poses within
+/// reach of each other: every culled job, generated anyway, has no candidate.
+#[test]
+fn the_job_cull_never_drops_a_job_with_a_candidate() {
+    use factory_engine::contact::generate::{generate_job_cpu, Xf};
+    use factory_engine::contact::model::FlatModel;
+    use factory_engine::crowd::{job_far_cpu, NearPair};
+    use factory_engine::mesh::box_mesh;
+    use std::sync::Arc;
+    let cache = SdfCache::new(SdfCache::default_dir());
+    let mesh = Arc::new(box_mesh(H).split_long_triangles(0.002));
+    let shape = |body| ShapeDesc::new(body, ShapeGeometry::Mesh { mesh: mesh.clone(), sdf_resolution: Some(32) });
+    let spec = pair_spec(&shape(0), &shape(1), OFFSET, &cache).unwrap();
+    let model = CrowdModel::uniform(2, spec, vec![]);
+    let contact = ContactConfig { chunk_triangles: 256, max_patches: 16, ..Default::default() };
+    let flat = CrowdFlat::new(&model, &contact).unwrap();
+    assert!(flat.jobs_per_pair >= 4, "{} jobs per pair", flat.jobs_per_pair);
+    let np = NearPair { a: 0, key: 1, b: 1, template: 0 };
+    let one = FlatModel {
+        pairs: vec![flat.pair_record(&np)],
+        jobs: flat.flat.jobs.clone(),
+        tri_verts: flat.flat.tri_verts.clone(),
+        sdf_values: flat.flat.sdf_values.clone(),
+    };
+    let pair = &one.pairs[0];
+    let mut rng = SplitMix64(17);
+    let (mut culled, mut kept_with_candidates) = (0, 0);
+    for _ in 0..300 {
+        let axis = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5).normalize_or(Vec3::Z);
+        let p = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5) * 0.09;
+        let q = [Xf::IDENTITY, TransformGpu::new(p, Quat::from_axis_angle(axis, rng.unit() * 6.0)).xf()];
+        let wa = q[0].mul(&TransformGpu { p: pair.a_pos, q: pair.a_rot }.xf());
+        let wb = q[1].mul(&TransformGpu { p: pair.b_pos, q: pair.b_rot }.xf());
+        for (k, job) in one.jobs.iter().enumerate() {
+            let out = generate_job_cpu(&one, job, &q, 2, 0, &contact);
+            if job_far_cpu(pair, &one.sdf_values, flat.job_bounds[k], &wa, &wb) {
+                culled += 1;
+                assert_eq!(out.candidates, 0, "job {k} culled at body 1 pose {p:?} has {} candidates", out.candidates);
+            } else if out.candidates > 0 {
+                kept_with_candidates += 1;
+            }
+        }
+    }
+    println!("job cull: {culled} of {} jobs culled, {kept_with_candidates} kept with candidates", 300 * one.jobs.len());
+    assert!(culled > 100 && kept_with_candidates > 100, "the poses exercise both outcomes");
 }

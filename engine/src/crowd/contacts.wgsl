@@ -11,6 +11,8 @@
 @group(0) @binding(1) var<uniform> cp: CrowdParams;
 @group(0) @binding(2) var<storage, read> tri_verts: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> sdf_values: array<u32>;
+// Bounding sphere of job k of template t at [t * jobs_per_pair + k] (CrowdFlat::job_bounds).
+@group(0) @binding(4) var<storage, read> job_bounds: array<vec4<f32>>;
 @group(1) @binding(0) var<storage, read> body_q: array<Transform>;
 @group(1) @binding(1) var<storage, read> crowd_pairs: array<Pair>;
 @group(2) @binding(0) var<storage, read_write> job_patches: array<PatchOut>;
@@ -37,10 +39,10 @@ fn shape_pose(w: u32, body: u32, pos: vec4<f32>, rot: vec4<f32>) -> Transform {
 
 @compute @workgroup_size(WG)
 fn crowd_generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
-    let w = wid.y;
+    let w = wid.z;
     let jobs = cp.jobs_per_pair;
-    let e = wid.x / jobs;
-    let k = wid.x % jobs;
+    let e = wid.x;
+    let k = wid.y;
     if (e >= pair_count(lid, w)) {
         return;
     }
@@ -50,6 +52,17 @@ fn crowd_generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
     let world_a = shape_pose(w, pair.body_a, pair.a_pos, pair.a_rot);
     let world_b = shape_pose(w, pair.body_b, pair.b_pos, pair.b_rot);
     if (k >= pair.job_count || pair_far(pair, world_a, world_b)) {
+        if (lid == 0u) {
+            job_patch_count[job] = 0u;
+        }
+        return;
+    }
+    // Job cull (mod.rs job_far_cpu): one sample at the centre of the job's bounding sphere stands for all
+    // its triangles' culls; most of a near pair's surface is far from the other shape.
+    let bound = job_bounds[bitcast<u32>(pair._pad1) * jobs + k];
+    let sc = sdf_sample(pair, xf_point(xf_mul(xf_inv(world_b), world_a), bound.xyz));
+    let slack = select(pair.sdf_origin.w, 0.0, pair.sdf_kind == 1u);
+    if (bound.w < 0.0 || sc.d - bound.w - slack > pair.contact_offset) {
         if (lid == 0u) {
             job_patch_count[job] = 0u;
         }

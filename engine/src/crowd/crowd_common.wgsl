@@ -66,6 +66,6 @@ fn m_old_row_first(w: u32) -> u32 { return m_pairs(w) + 8u * cp.cap; }
 
 // Indirect dispatch arguments (x, y, z) in crowd_args.
 const A_PAIRS: u32 = 0u;     // one invocation per near pair (64 per workgroup)
-const A_GENERATE: u32 = 3u;  // one workgroup per (near pair, job)
+const A_GENERATE: u32 = 3u;  // one workgroup per (near pair, job, world)
 const A_MERGE: u32 = 6u;     // one workgroup per near pair
 const A_COLOUR: u32 = 9u;    // colour c at A_COLOUR + 3c: one invocation per pair of that colour

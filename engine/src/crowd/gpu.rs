@@ -170,14 +170,11 @@ impl CrowdPipeline {
             });
         }
         let jobs = flat.jobs_per_pair;
-        if cfg.max_pairs as u64 * jobs as u64 > max_dim as u64 {
+        if cfg.max_pairs > max_dim {
             return Err(EngineError::Config {
                 field: "max_pairs",
                 value: cfg.max_pairs.to_string(),
-                expected: format!(
-                    "at most {} ({max_dim} workgroups per dispatch / {jobs} jobs per pair)",
-                    max_dim / jobs
-                ),
+                expected: format!("at most {max_dim} (workgroups per dispatch dimension)"),
             });
         }
         if contact.workgroup_bytes() > limits.max_compute_workgroup_storage_size {
@@ -270,6 +267,7 @@ impl CrowdPipeline {
         rules.extend(&model.static_rule);
         let rules = gpu.storage_buffer("crowd-rules", &rules, none);
         let tri_verts = gpu.storage_buffer("crowd-tri-verts", &flat.flat.tri_verts, none);
+        let job_bounds = gpu.storage_buffer("crowd-job-bounds", &flat.job_bounds, none);
         let sdf_values = gpu.storage_buffer("crowd-sdf-values", &flat.flat.sdf_values, none);
         let identity = vec![TransformGpu::new(Vec3::ZERO, Quat::IDENTITY); (w * n as u64) as usize];
         let body_q = gpu.storage_buffer("crowd-body-q", &identity, none);
@@ -302,7 +300,7 @@ impl CrowdPipeline {
         );
         let contact_layout = gpu.explicit_layout(
             "crowd-contacts",
-            &[&[Binding::Uniform, Binding::Uniform, ro, ro], &[ro, ro], &[rw, rw, rw]],
+            &[&[Binding::Uniform, Binding::Uniform, ro, ro, ro], &[ro, ro], &[rw, rw, rw]],
         );
         let merge_layout =
             gpu.explicit_layout("crowd-merge", &[&[Binding::Uniform, Binding::Uniform], &[ro, ro, ro], &[rw, rw]]);
@@ -349,7 +347,7 @@ impl CrowdPipeline {
             gpu.bind_explicit(&near_layout, 3, &[&pass_buf], 16),
         ];
         let contact_groups = vec![
-            gpu.bind_explicit(&contact_layout, 0, &[&contact_buf, &cp_buf, &tri_verts, &sdf_values], 0),
+            gpu.bind_explicit(&contact_layout, 0, &[&contact_buf, &cp_buf, &tri_verts, &sdf_values, &job_bounds], 0),
             gpu.bind_explicit(&contact_layout, 1, &[&body_q, &crowd_pairs], 0),
             gpu.bind_explicit(&contact_layout, 2, &[&job_patches, &job_patch_count, &meta], 0),
         ];

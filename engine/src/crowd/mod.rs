@@ -31,13 +31,15 @@
 
 pub mod gpu;
 
-use crate::contact::generate::{pair_far_cpu, shape_world, Xf};
+use crate::contact::generate::{pair_far_cpu, sdf_sample_cpu, shape_world, Xf};
 use crate::contact::model::{FlatModel, JobGpu, PairGpu, NO_BODY};
-use crate::contact::{contacts_cpu, ContactConfig, ContactModel, PairSpec, TransformGpu};
+use crate::contact::{contacts_cpu, ContactConfig, ContactModel, PairSpec, QueryShape, TransformGpu};
 use crate::error::{EngineError, Result};
 use crate::solver::{step_cpu, BodyModel, BodyState, Control, SolverConfig, WarmStart};
 use glam::Vec3;
 
+/// Query triangles per job on a crowd (see CrowdFlat::new).
+const CHUNK: u32 = 256;
 /// No template for a pair of classes (the pair never collides).
 pub const NO_RULE: u32 = u32::MAX;
 /// Colour word of an uncoloured pair.
@@ -242,6 +244,46 @@ pub struct CrowdFlat {
     pub chunk: u32,
     /// Jobs per near pair (the most any template needs).
     pub jobs_per_pair: u32,
+    /// Bounding sphere of job k's triangles of template t at [t * jobs_per_pair + k]: centre in the query
+    /// shape's frame xyz [m], radius (the query radius included) w [m]; w < 0 where the template has no
+    /// job k.
+    pub job_bounds: Vec<[f32; 4]>,
+}
+
+/// Triangles by the Morton code of their centroids in the shape's box (10 bits per axis), so that a job's
+/// run of triangles is a compact piece of the surface and its bounding sphere can cull it whole.
+fn spatial_order(q: &QueryShape) -> QueryShape {
+    let cent: Vec<Vec3> = q.triangles.iter().map(|[a, b, c]| (*a + *b + *c) / 3.0).collect();
+    let (lo, hi) = cent.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), c| (l.min(*c), h.max(*c)));
+    let scale = (hi - lo).max(Vec3::splat(1e-9));
+    let spread = |v: u32| {
+        let mut x = v & 0x3ff;
+        x = (x | (x << 16)) & 0x030000ff;
+        x = (x | (x << 8)) & 0x0300f00f;
+        x = (x | (x << 4)) & 0x030c30c3;
+        (x | (x << 2)) & 0x09249249
+    };
+    let code = |c: &Vec3| {
+        let u = ((*c - lo) / scale * 1023.0).round().clamp(Vec3::ZERO, Vec3::splat(1023.0));
+        spread(u.x as u32) | (spread(u.y as u32) << 1) | (spread(u.z as u32) << 2)
+    };
+    let mut order: Vec<usize> = (0..q.triangles.len()).collect();
+    order.sort_by_key(|&i| (code(&cent[i]), i));
+    QueryShape { triangles: order.iter().map(|&i| q.triangles[i]).collect(), radius: q.radius }
+}
+
+/// Whether job `k` of near pair `pair` (its shapes posed at `world_a`, `world_b`) cannot have a candidate
+/// (contacts.wgsl's job cull): the SDF at the centre of the job's bounding sphere, less its radius, the
+/// query radius and the grid's interpolation slack, is beyond the contact offset (the field is 1-Lipschitz,
+/// as the per-triangle cull of generate.wgsl assumes).
+pub fn job_far_cpu(pair: &PairGpu, sdf_values: &[u32], bound: [f32; 4], world_a: &Xf, world_b: &Xf) -> bool {
+    if bound[3] < 0.0 {
+        return true;
+    }
+    let b_from_a = world_b.inv().mul(world_a);
+    let (d, _) = sdf_sample_cpu(pair, sdf_values, b_from_a.point(Vec3::from_slice(&bound[..3])));
+    let slack = if pair.sdf_kind == 1 { 0.0 } else { pair.sdf_origin[3] };
+    d - bound[3] - slack > pair.contact_offset
 }
 
 impl CrowdFlat {
@@ -249,12 +291,17 @@ impl CrowdFlat {
         model.validate()?;
         contact.validate()?;
         let longest = model.templates.iter().map(|p| p.query.triangles.len() as u32).max().unwrap_or(0);
-        // A world of many pairs fills the device with pairs, so jobs are as long as the loop budget allows.
+        // A world of many pairs fills the device with pairs, so jobs are short, for their bounding spheres
+        // to cull most of a pair's surface (see job_bounds).
         let chunk = if contact.chunk_triangles > 0 {
             contact.chunk_triangles
         } else {
-            longest.next_multiple_of(256).clamp(256, contact.max_chunk_triangles().max(256))
+            CHUNK.min(longest.next_multiple_of(256)).clamp(256, contact.max_chunk_triangles().max(256))
         };
+        let mut model = model.clone();
+        for t in &mut model.templates {
+            t.query = std::sync::Arc::new(spatial_order(&t.query));
+        }
         let flat = model.flatten(chunk)?;
         let jobs_per_pair = flat.pairs.iter().map(|p| p.job_count).max().unwrap_or(1).max(1);
         if chunk > contact.max_chunk_triangles() || jobs_per_pair > contact.max_jobs_per_pair() {
@@ -268,7 +315,22 @@ impl CrowdFlat {
                 ),
             });
         }
-        Ok(CrowdFlat { model: model.clone(), flat, chunk, jobs_per_pair })
+        let mut job_bounds = vec![[0.0, 0.0, 0.0, -1.0]; flat.pairs.len() * jobs_per_pair as usize];
+        for (ti, p) in flat.pairs.iter().enumerate() {
+            for k in 0..p.job_count {
+                let first = (p.tri_first + k * chunk) as usize;
+                let n = chunk.min(p.tri_count - k * chunk) as usize;
+                let pts: Vec<Vec3> =
+                    flat.tri_verts[3 * first..3 * (first + n)].iter().map(|v| Vec3::from_slice(&v[..3])).collect();
+                let (lo, hi) =
+                    pts.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+                let c = 0.5 * (lo + hi);
+                let r = pts.iter().map(|v| v.distance(c)).fold(0.0f32, f32::max);
+                // One part in 1e5 of slack for the rounding of the test, as the pair's bounding spheres.
+                job_bounds[ti * jobs_per_pair as usize + k as usize] = [c.x, c.y, c.z, (r + p.radius) * (1.0 + 1e-5)];
+            }
+        }
+        Ok(CrowdFlat { model, flat, chunk, jobs_per_pair, job_bounds })
     }
 
     fn class(&self, body: u32) -> u32 {
@@ -445,8 +507,15 @@ impl CrowdCpu {
             self.world_flat.jobs.clear();
             for (k, np) in solve_pairs.iter().enumerate() {
                 let t = &self.flat.flat.pairs[np.template as usize];
+                let record = self.flat.pair_record(np);
+                let wa = shape_world(&xf, n as u32, w as u32, np.a, t.a_pos, t.a_rot);
+                let wb = shape_world(&xf, n as u32, w as u32, np.b, t.b_pos, t.b_rot);
                 let job_first = self.world_flat.jobs.len() as u32;
                 for j in 0..t.job_count {
+                    let bound = self.flat.job_bounds[(np.template * self.flat.jobs_per_pair + j) as usize];
+                    if job_far_cpu(&record, &self.flat.flat.sdf_values, bound, &wa, &wb) {
+                        continue;
+                    }
                     let first = j * self.flat.chunk;
                     self.world_flat.jobs.push(JobGpu {
                         pair: k as u32,
@@ -455,7 +524,8 @@ impl CrowdCpu {
                         slot: j,
                     });
                 }
-                self.world_flat.pairs.push(PairGpu { job_first, ..self.flat.pair_record(np) });
+                let job_count = self.world_flat.jobs.len() as u32 - job_first;
+                self.world_flat.pairs.push(PairGpu { job_first, job_count, ..record });
             }
             let range = w * n..(w + 1) * n;
             let contacts = contacts_cpu(&self.world_flat, n as u32, 1, &state.body_q[range.clone()], &self.contact);

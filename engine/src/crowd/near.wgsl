@@ -172,7 +172,10 @@ fn near_scan(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) w
         store(meta_base(w) + M_COUNT, count);
         store(meta_base(w) + M_FLAGS, select(0u, FLAG_PAIRS, total > cp.cap));
         set_args(A_PAIRS, (count + 63u) / 64u);
-        set_args(A_GENERATE, count * cp.jobs_per_pair);
+        // Generation: near pair x job x world.
+        atomicMax(&crowd_args[A_GENERATE], count);
+        atomicMax(&crowd_args[A_GENERATE + 1u], cp.jobs_per_pair);
+        atomicMax(&crowd_args[A_GENERATE + 2u], cp.world_count);
         set_args(A_MERGE, count);
     }
 }
