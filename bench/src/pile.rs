@@ -263,10 +263,15 @@ pub struct PileReport {
     pub last_second_max_drift_mm: f64,
     /// Deepest contact at any frame start [mm] (positive: penetration).
     pub max_penetration_mm: f64,
+    /// Every pose and velocity stayed finite.
     pub finite: bool,
     /// Worlds whose step did not fit lavapipe's loop budget or (coloured solver) the near-pair, colour or
-    /// patch capacities (flagged, not stepped) in any frame.
+    /// patch capacities (flagged, not stepped) in any frame ...
     pub over_loop_budget: bool,
+    /// ... in how many frames ...
+    pub flagged_frames: u32,
+    /// ... and why (coloured solver: factory_engine::crowd::FLAG_* bits seen).
+    pub flags_seen: u32,
     pub adapter: String,
 }
 
@@ -311,6 +316,8 @@ struct Tally {
     max_energy: f64,
     finite: bool,
     over: bool,
+    flagged_frames: u32,
+    flags_seen: u32,
     mark: Vec<Vec3>,
     last: BodyState,
     frames: u32,
@@ -334,6 +341,8 @@ impl Tally {
             max_energy: e0,
             finite: true,
             over: false,
+            flagged_frames: 0,
+            flags_seen: 0,
             mark: start_com,
             last: state.clone(),
             frames,
@@ -348,12 +357,18 @@ impl Tally {
         }
     }
 
-    /// After a frame: its state, per-world flags, and the deepest contact it started from.
-    fn after(&mut self, scene: &PileScene, s: BodyState, ok: &[bool], deepest: Option<f32>) {
+    /// After a frame: its state, whether some world was flagged and not stepped (and why: crowd FLAG_*
+    /// bits), and the deepest contact it started from.
+    fn after(&mut self, scene: &PileScene, s: BodyState, flagged: bool, flags: u32, deepest: Option<f32>) {
         if let Some(d) = deepest {
             self.deepest = self.deepest.min(d);
         }
-        self.finite &= ok.iter().all(|&o| o);
+        self.over |= flagged;
+        self.flagged_frames += flagged as u32;
+        self.flags_seen |= flags;
+        let finite = |v: Vec3| v.is_finite();
+        self.finite &= s.body_q.iter().all(|t| t.p.iter().chain(&t.q).all(|x| x.is_finite()))
+            && s.body_qd.iter().all(|v| finite(v[0]) && finite(v[1]));
         self.max_speed = self.max_speed.max(s.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64);
         self.max_energy = self.max_energy.max(total_energy(scene, &s));
         self.last = s;
@@ -426,6 +441,8 @@ fn report(
         max_penetration_mm: (-t.deepest as f64 * 1e3).max(0.0),
         finite: t.finite,
         over_loop_budget: t.over,
+        flagged_frames: t.flagged_frames,
+        flags_seen: t.flags_seen,
         adapter: gpu.info.name.clone(),
     }
 }
@@ -461,10 +478,20 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
             .flat_map(|w| w.iter().flat_map(|(_, ps)| ps.iter().flat_map(|p| p.contacts.iter().map(|c| c.depth))))
             .reduce(f32::min);
         let frames = pipe.read_frames(gpu);
-        t.over |= frames.iter().any(|f| f.flags != 0);
+        if run.bodies >= 256 && (f + 1) % 30 == 0 {
+            // Long runs say how far they are (stderr: the report on stdout stays one JSON object).
+            eprintln!(
+                "frame {}/{}: {} near pairs, {:.0} ms per frame so far",
+                f + 1,
+                t.frames,
+                frames[0].pairs.len(),
+                t.wall * 1e3 / (f + 1) as f64
+            );
+        }
         colours = colours.max(frames.iter().map(|f| f.colour_count).max().unwrap_or(0));
-        let (s, ok) = pipe.read_state(gpu);
-        t.after(scene, s, &ok, deepest);
+        let flags = frames.iter().fold(0, |a, f| a | f.flags);
+        let (s, _) = pipe.read_state(gpu);
+        t.after(scene, s, flags != 0, flags, deepest);
     }
     let stats = pipe.read_stats(gpu);
     let world0 = &pipe.read_patches(gpu)[0];
@@ -501,9 +528,9 @@ fn run_serial(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pile
         gpu.wait();
         t.wall += clock.elapsed().as_secs_f64();
         let deepest = crate::scene::min_depth_all(&pipe.read(gpu));
-        let (s, ok) = solver.read_state(gpu, &pipe);
-        t.over |= solver.worlds_over_loop_budget(gpu).iter().any(|&o| o);
-        t.after(scene, s, &ok, deepest);
+        let (s, _) = solver.read_state(gpu, &pipe);
+        let over = solver.worlds_over_loop_budget(gpu).iter().any(|&o| o);
+        t.after(scene, s, over, 0, deepest);
     }
     let c = pipe.read(gpu);
     let last = LastContacts {

@@ -3,7 +3,9 @@
 //! Data flows one way: triangle meshes ([`mesh`]) and URDFs ([`urdf`]) are loaded on the host, signed
 //! distance fields are baked on the CPU and cached on disk ([`sdf`]), and the GPU ([`gpu`]) generates one
 //! contact candidate per query triangle against the opposing SDF and reduces the candidates into patches in
-//! workgroup memory ([`contact`]). Every kernel has a plain-Rust twin used by parity tests.
+//! workgroup memory ([`contact`]). A Gauss-Seidel solver steps the bodies ([`solver`]: one invocation per
+//! world for many small worlds; [`crowd`]: near pairs found per frame and graph-coloured for worlds of many
+//! bodies). Every kernel has a plain-Rust twin used by parity tests.
 
 pub mod error;
 pub mod mesh;

@@ -83,9 +83,20 @@ fn max_distance(a: &BodyState, b: &BodyState) -> f32 {
 
 #[test]
 fn near_pairs_and_colours_match_the_cpu_twin_and_colour_properly() {
+    near_pairs_and_colours(CrowdConfig::for_bodies(40).colour_rounds);
+}
+
+/// Two rounds colour only part of a crowded world: the serial completion colours the rest, alike on the
+/// GPU and in the CPU twin, still properly.
+#[test]
+fn pairs_the_rounds_leave_uncoloured_are_coloured_serially_alike() {
+    near_pairs_and_colours(2);
+}
+
+fn near_pairs_and_colours(rounds: u32) {
     let n = 40;
     let (model, bodies) = box_model(n, 0.5);
-    let cfg = CrowdConfig::for_bodies(n);
+    let cfg = CrowdConfig { colour_rounds: rounds, ..CrowdConfig::for_bodies(n) };
     let contact = ContactConfig { max_patches: 16, ..Default::default() };
     let solver = SolverConfig::default();
     let worlds = 2;
@@ -107,6 +118,10 @@ fn near_pairs_and_colours_match_the_cpu_twin_and_colour_properly() {
         assert_eq!(flags, 0, "world {w}: coloured within {} colours and {} rounds", cfg.max_colours, cfg.colour_rounds);
         assert_eq!(f.colours, colours, "world {w}: colours, GPU vs CPU twin");
         assert_eq!(f.colour_count, count);
+        if rounds < 10 {
+            // The rounds alone did not finish: all rounds give another colouring.
+            assert_ne!(colours, colour_pairs(&pairs, n, cfg.max_colours, 1000).0, "world {w}: the serial completion ran");
+        }
         // A proper colouring: two pairs that share a body never share a colour.
         for (i, p) in pairs.iter().enumerate() {
             for (j, o) in pairs.iter().enumerate().skip(i + 1) {
@@ -258,7 +273,12 @@ fn a_world_over_its_pair_capacity_is_flagged_and_left_as_it_was_while_others_ste
     let (s, ok) = pipe.read_state(gpu());
     let frames = pipe.read_frames(gpu());
     assert_eq!((ok[0], ok[1]), (true, false), "the packed world is flagged");
-    assert_eq!(frames[1].flags & FLAG_PAIRS, FLAG_PAIRS, "flagged for its pair count: {}", frames[1].flags);
+    assert_eq!(frames[1].flags, FLAG_PAIRS, "flagged for its pair count (alone)");
+    let mut cpu = CrowdCpu::new(&model, &bodies, &cfg, &contact, &solver).unwrap();
+    let mut twin = two.clone();
+    let c = cpu.step(&mut twin, &Control::default());
+    assert_eq!((c[0].0.flags, c[1].0.flags, c[1].1), (0, FLAG_PAIRS, false), "the CPU twin flags alike");
+    assert_eq!(&twin.body_q[n as usize..], &packed[..], "and leaves the world as it was");
     assert_eq!(&s.body_q[n as usize..], &packed[..], "the flagged world is left as it was");
     // World 0 steps exactly as it does alone.
     let alone = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
@@ -316,4 +336,40 @@ fn the_job_cull_never_drops_a_job_with_a_candidate() {
     }
     println!("job cull: {culled} of {} jobs culled, {kept_with_candidates} kept with candidates", 300 * one.jobs.len());
     assert!(culled > 100 && kept_with_candidates > 100, "the poses exercise both outcomes");
+}
+
+/// The auto-reset of one many-body world: world 1 is given a NaN velocity, is flagged, and is reset alone;
+/// a run in which it never broke but was reset to the same state at the same frame ends bitwise the same.
+#[test]
+fn a_broken_crowd_world_is_reset_alone_and_every_world_then_steps_as_if_it_never_broke() {
+    let n = 12;
+    let (model, bodies, start) = stacked_boxes();
+    let cfg = CrowdConfig::for_bodies(n);
+    let contact = ContactConfig { max_patches: 16, ..Default::default() };
+    let solver = SolverConfig { pos_iters: 16, ..Default::default() };
+    let pipe = CrowdPipeline::new(gpu(), &model, &bodies, 2, &cfg, &contact, &solver).unwrap();
+    let mut good = start.clone();
+    good.body_q.extend(start.body_q.iter().copied());
+    good.body_qd.extend(start.body_qd.iter().copied());
+    let run = |s0: &BodyState| {
+        pipe.write_state(gpu(), s0);
+        for _ in 0..8 {
+            pipe.submit_frame(gpu());
+        }
+        let (_, ok_before) = pipe.read_state(gpu());
+        pipe.reset_world(gpu(), 1, &start.body_q, &start.body_qd);
+        for _ in 0..8 {
+            pipe.submit_frame(gpu());
+        }
+        let (s, ok) = pipe.read_state(gpu());
+        (s, ok_before, ok)
+    };
+    let mut broken = good.clone();
+    broken.body_qd[n as usize + 3][0] = Vec3::new(f32::NAN, 0.0, 0.0);
+    let (a, ok_a0, ok_a) = run(&good);
+    let (b, ok_b0, ok_b) = run(&broken);
+    assert_eq!((ok_a0, ok_b0), (vec![true; 2], vec![true, false]), "world 1 broke and was flagged");
+    assert_eq!((ok_a, ok_b), (vec![true; 2], vec![true; 2]), "after its reset world 1 is ok");
+    let bits = |s: &BodyState| -> Vec<u32> { bytemuck::cast_slice::<TransformGpu, u32>(&s.body_q).to_vec() };
+    assert_eq!(bits(&a), bits(&b), "both worlds bitwise as if world 1 never broke");
 }

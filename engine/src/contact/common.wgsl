@@ -63,7 +63,8 @@ struct Pair {
     area_unit: f32,
     min_separation: f32,
     friction: f32,
-    _pad1: f32,
+    // A crowd pair's template (crowd/near.wgsl); unused elsewhere.
+    crowd_template: u32,
     _pad2: f32,
     _pad3: f32,
     // Bounding spheres: the query shape's in its frame, the SDF shape's in its frame (w < 0: unbounded).

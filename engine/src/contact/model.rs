@@ -106,7 +106,9 @@ pub struct PairGpu {
     pub min_separation: f32,
     /// Coulomb friction coefficient (unitless).
     pub friction: f32,
-    pub _pad: [f32; 3],
+    /// A crowd pair's template index (crate::crowd); 0 elsewhere.
+    pub crowd_template: u32,
+    pub _pad: [f32; 2],
     /// Bounding sphere of the query shape (its triangles plus `radius`): centre in the query shape's frame
     /// xyz [m], radius w [m].
     pub a_bound: [f32; 4],
@@ -336,7 +338,8 @@ impl ContactModel {
                 // Contacts of one patch closer than a tenth of a typical edge add nothing.
                 min_separation: 0.1 * mean_edge,
                 friction: p.friction,
-                _pad: [0.0; 3],
+                crowd_template: 0,
+                _pad: [0.0; 2],
                 a_bound: bounding_sphere(p.query.triangles.iter().flatten().copied(), p.query.radius),
                 b_bound: p.sdf.bound(),
             });

@@ -41,6 +41,7 @@ const FLAG_PAIRS: u32 = 1u;
 const FLAG_COLOURS: u32 = 2u;
 const FLAG_ROUNDS: u32 = 4u;
 const FLAG_PATCHES: u32 = 8u;
+const FLAG_RECOUNT: u32 = 16u;
 const UNCOLOURED: u32 = 0xffffffffu;
 const COLOUR_NONE: u32 = 255u;
 

@@ -205,6 +205,18 @@ impl CrowdPipeline {
             hint,
         )?;
         too_large(gpu, "SDF values".into(), flat.flat.sdf_values.len() as u64 * 4, "lower the SDF resolution")?;
+        too_large(
+            gpu,
+            format!("per-world bookkeeping ({w} worlds x {meta_stride} words)"),
+            w * meta_stride as u64 * 4,
+            hint,
+        )?;
+        too_large(
+            gpu,
+            format!("near-pair records ({w} worlds x {cap} pairs)"),
+            w * cap * std::mem::size_of::<PairGpu>() as u64,
+            hint,
+        )?;
 
         let params = CrowdParamsGpu {
             world_count,
@@ -396,10 +408,7 @@ impl CrowdPipeline {
         assert_eq!(state.body_q.len(), n, "body_q shape [world_count * body_count]");
         assert_eq!(state.body_qd.len(), n, "body_qd shape [world_count * body_count]");
         self.forget_warm_start(gpu);
-        gpu.queue.write_buffer(&self.body_q, 0, bytemuck::cast_slice(&state.body_q));
-        let qd: Vec<[f32; 4]> =
-            state.body_qd.iter().flat_map(|v| [v[0].extend(0.0).to_array(), v[1].extend(0.0).to_array()]).collect();
-        gpu.queue.write_buffer(&self.body_qd, 0, bytemuck::cast_slice(&qd));
+        crate::solver::gpu::write_world_bodies(gpu, &self.body_q, &self.body_qd, 0, &state.body_q, &state.body_qd);
     }
 
     /// Forgets every world's warm-start impulses and last frame's pairs; the external wrenches stay.
@@ -409,6 +418,27 @@ impl CrowdPipeline {
         enc.clear_buffer(&self.scratch, 0, Some(status));
         enc.clear_buffer(&self.scratch, status + control, None);
         enc.clear_buffer(&self.meta, 0, None);
+        gpu.queue.submit([enc.finish()]);
+    }
+
+    /// Resets world `world` alone (the auto-reset of one finished or diverged world): its poses and
+    /// velocities (shape [body_count] each), status, warm-start rows and last frame's pairs; every other
+    /// world, and the external wrenches, stay as they are.
+    pub fn reset_world(&self, gpu: &GpuContext, world: u32, body_q: &[TransformGpu], body_qd: &[[Vec3; 2]]) {
+        assert!(world < self.world_count, "world {world} of {}", self.world_count);
+        let n = self.body_count as usize;
+        assert!(body_q.len() == n && body_qd.len() == n, "one world's bodies: shape [body_count = {n}]");
+        crate::solver::gpu::write_world_bodies(gpu, &self.body_q, &self.body_qd, world, body_q, body_qd);
+        let (status, control) = self.control_range();
+        let (w, wc) = (world as u64, self.world_count as u64);
+        let rows = self.cfg.max_patches_per_world as u64 * 4 * 4 * 16;
+        let stride = self.params.meta_stride as u64 * 4;
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(&self.scratch, w * 16, Some(16));
+        for block in 0..2 {
+            enc.clear_buffer(&self.scratch, status + control + (block * wc + w) * rows, Some(rows));
+        }
+        enc.clear_buffer(&self.meta, w * stride, Some(stride));
         gpu.queue.submit([enc.finish()]);
     }
 
@@ -563,7 +593,7 @@ impl CrowdPipeline {
                     pairs: (0..count)
                         .map(|e| {
                             let p = &pairs[base + e];
-                            NearPair { a: p.body_a, key: p.job_first, b: p.body_b, template: p._pad[0].to_bits() }
+                            NearPair { a: p.body_a, key: p.job_first, b: p.body_b, template: p.crowd_template }
                         })
                         .collect(),
                     colours: (0..count)

@@ -42,6 +42,9 @@ use glam::Vec3;
 const CHUNK: u32 = 256;
 /// No template for a pair of classes (the pair never collides).
 pub const NO_RULE: u32 = u32::MAX;
+/// Neighbour visits the serial completion of the colouring may make per world (near.wgsl's SERIAL_VISITS;
+/// within lavapipe's 65535 loop passes per invocation, with the colour sort's own loops).
+const SERIAL_VISITS: usize = 24576;
 /// Colour word of an uncoloured pair.
 const UNCOLOURED: u32 = u32::MAX;
 /// Colour index of a pair that found no free colour below `max_colours`.
@@ -51,10 +54,13 @@ const COLOUR_NONE: u32 = 255;
 pub const FLAG_PAIRS: u32 = 1;
 /// A pair needed a colour beyond [`CrowdConfig::max_colours`].
 pub const FLAG_COLOURS: u32 = 2;
-/// Pairs still uncoloured after [`CrowdConfig::colour_rounds`] rounds.
+/// Pairs still uncoloured after [`CrowdConfig::colour_rounds`] rounds and the serial completion's budget.
 pub const FLAG_ROUNDS: u32 = 4;
-/// More patches than [`CrowdConfig::max_patches_per_world`].
+/// More patches than [`CrowdConfig::max_patches_per_world`] (raised only for a world coloured in full).
 pub const FLAG_PATCHES: u32 = 8;
+/// The near test gave another answer when the list was written than when it was counted (GPU only:
+/// floating-point contraction differing between kernels; the world's list would have a gap).
+pub const FLAG_RECOUNT: u32 = 16;
 
 /// The shapes of a many-body world: each body has a shape class, and a template pair per pair of
 /// classes (and per static shape and class) says how two such shapes collide.
@@ -101,6 +107,14 @@ impl CrowdModel {
             |field: &'static str, value: String, expected: String| Err(EngineError::Config { field, value, expected });
         if self.body_count == 0 {
             return bad("body_count", "0".into(), "at least 1 body".into());
+        }
+        // Per-body kernels loop over every body in one invocation (lavapipe: 65535 loop passes each).
+        if self.body_count + self.static_count > 30_000 {
+            return bad(
+                "body_count",
+                format!("{} bodies + {} static shapes", self.body_count, self.static_count),
+                "at most 30000 together per world".into(),
+            );
         }
         if self.body_class.len() != self.body_count as usize {
             return bad(
@@ -160,17 +174,18 @@ pub struct CrowdConfig {
 impl CrowdConfig {
     /// Room for `bodies` bodies with about 8 near pairs each and 8 patches per pair.
     pub fn for_bodies(bodies: u32) -> Self {
-        let max_pairs = (8 * bodies).max(64);
-        CrowdConfig { max_pairs, max_colours: 32, colour_rounds: 48, max_patches_per_world: 8 * max_pairs }
+        let max_pairs = (8 * bodies).clamp(64, 10_000);
+        CrowdConfig { max_pairs, max_colours: 32, colour_rounds: 64, max_patches_per_world: 8 * max_pairs }
     }
 
     pub fn validate(&self) -> Result<()> {
         let bad = |field: &'static str, value: u32, expected: &str| {
             Err(EngineError::Config { field, value: value.to_string(), expected: expected.into() })
         };
-        if self.max_pairs == 0 || self.max_pairs > 30_000 {
-            // The colour sort walks a world's pairs twice in one invocation (lavapipe's 65535 loop passes).
-            return bad("max_pairs", self.max_pairs, "1..=30000 near pairs per world");
+        if self.max_pairs == 0 || self.max_pairs > 10_000 {
+            // The colour sort walks a world's pairs three times in one invocation, plus the serial
+            // completion's SERIAL_VISITS (lavapipe's 65535 loop passes).
+            return bad("max_pairs", self.max_pairs, "1..=10000 near pairs per world");
         }
         if self.max_colours == 0 || self.max_colours > 32 {
             return bad("max_colours", self.max_colours, "1..=32 (one bit per colour)");
@@ -274,15 +289,15 @@ fn spatial_order(q: &QueryShape) -> QueryShape {
 
 /// Whether job `k` of near pair `pair` (its shapes posed at `world_a`, `world_b`) cannot have a candidate
 /// (contacts.wgsl's job cull): the SDF at the centre of the job's bounding sphere, less its radius, the
-/// query radius and the grid's interpolation slack, is beyond the contact offset (the field is 1-Lipschitz,
-/// as the per-triangle cull of generate.wgsl assumes).
+/// query radius and the grid's interpolation slack (two voxels: trilinear interpolation can be off by up to
+/// sqrt(3)/2 of a voxel either side of the 1-Lipschitz field) is beyond the contact offset.
 pub fn job_far_cpu(pair: &PairGpu, sdf_values: &[u32], bound: [f32; 4], world_a: &Xf, world_b: &Xf) -> bool {
     if bound[3] < 0.0 {
         return true;
     }
     let b_from_a = world_b.inv().mul(world_a);
     let (d, _) = sdf_sample_cpu(pair, sdf_values, b_from_a.point(Vec3::from_slice(&bound[..3])));
-    let slack = if pair.sdf_kind == 1 { 0.0 } else { pair.sdf_origin[3] };
+    let slack = if pair.sdf_kind == 1 { 0.0 } else { 2.0 * pair.sdf_origin[3] };
     d - bound[3] - slack > pair.contact_offset
 }
 
@@ -375,13 +390,14 @@ impl CrowdFlat {
     /// The near pair's record: its template with its bodies filled in (near.wgsl's `near_emit`).
     pub fn pair_record(&self, np: &NearPair) -> PairGpu {
         let mut p = PairGpu { body_a: np.a, body_b: np.b, job_first: np.key, ..self.flat.pairs[np.template as usize] };
-        p._pad[0] = f32::from_bits(np.template);
+        p.crowd_template = np.template;
         p
     }
 }
 
-/// Jones-Plassmann colouring of near pairs (near.wgsl's `colour_round` and `colour_sort`): each pair's
-/// colour index, the colours in use, and FLAG_COLOURS / FLAG_ROUNDS.
+/// Jones-Plassmann colouring of near pairs (near.wgsl's `colour_round` and `colour_sort`), the pairs the
+/// rounds leave uncoloured then coloured one after another: each pair's colour index, the colours in use,
+/// and FLAG_COLOURS / FLAG_ROUNDS.
 pub fn colour_pairs(pairs: &[NearPair], body_count: u32, max_colours: u32, rounds: u32) -> (Vec<u32>, u32, u32) {
     let n = pairs.len();
     let mut incident: Vec<Vec<usize>> = vec![Vec::new(); body_count as usize];
@@ -424,6 +440,33 @@ pub fn colour_pairs(pairs: &[NearPair], body_count: u32, max_colours: u32, round
                     flags |= FLAG_COLOURS;
                 }
             }
+        }
+    }
+    // The serial completion (near.wgsl's colour_sort): in list order, within SERIAL_VISITS neighbour visits.
+    let mut visits = 0usize;
+    for e in 0..n {
+        if colour[e] != UNCOLOURED {
+            continue;
+        }
+        let bodies = [pairs[e].a, pairs[e].b];
+        let cost: usize =
+            4 + bodies.iter().filter(|&&x| x != NO_BODY).map(|&x| incident[x as usize].len()).sum::<usize>();
+        if visits + cost > SERIAL_VISITS {
+            break;
+        }
+        visits += cost;
+        let mut used = 0u32;
+        for x in bodies.into_iter().filter(|&x| x != NO_BODY) {
+            for &f in &incident[x as usize] {
+                if f != e && colour[f] != UNCOLOURED && colour[f] & 0xff < 32 {
+                    used |= 1 << (colour[f] & 0xff);
+                }
+            }
+        }
+        let c = (!used).trailing_zeros();
+        colour[e] = if c < max_colours { c } else { COLOUR_NONE };
+        if c >= max_colours {
+            flags |= FLAG_COLOURS;
         }
     }
     if colour.contains(&UNCOLOURED) {
@@ -482,6 +525,14 @@ impl CrowdCpu {
         self.warm.clear();
     }
 
+    /// Forgets world `world`'s warm-start impulses (the twin of [`gpu::CrowdPipeline::reset_world`]; the
+    /// caller writes the world's new state).
+    pub fn reset_world(&mut self, world: usize) {
+        if let Some(w) = self.warm.get_mut(world) {
+            *w = Default::default();
+        }
+    }
+
     /// Steps every world of `state` by one frame; returns per world the frame's pairs, colours and flags,
     /// and whether the world is ok (stepped, finite, below max_speed).
     pub fn step(&mut self, state: &mut BodyState, control: &Control) -> Vec<(CrowdFrame, bool)> {
@@ -530,7 +581,7 @@ impl CrowdCpu {
             let range = w * n..(w + 1) * n;
             let contacts = contacts_cpu(&self.world_flat, n as u32, 1, &state.body_q[range.clone()], &self.contact);
             let patches: usize = contacts.patches.iter().map(|p| p.len()).sum();
-            if patches > self.cfg.max_patches_per_world as usize {
+            if frame.flags == 0 && patches > self.cfg.max_patches_per_world as usize {
                 frame.flags |= FLAG_PATCHES;
             }
             let (old_pairs, mut warm) = std::mem::take(&mut self.warm[w]);

@@ -4,7 +4,7 @@
 //
 // Crowd pairs: a near pair's record is its template's Pair with body_a, body_b filled in, and job_first
 // holding its sort key for body b (body b's index; 0xffff0000 + s for static shape s), so that the list,
-// sorted by (body_a, key), can be searched for a pair of bodies; _pad1 holds its template index (bits).
+// sorted by (body_a, key), can be searched for a pair of bodies; crowd_template holds its template.
 
 @group(0) @binding(0) var<uniform> cp: CrowdParams;
 @group(0) @binding(1) var<storage, read> templates: array<Pair>;
@@ -17,6 +17,8 @@
 @group(3) @binding(0) var<uniform> pp: PassParams;
 
 const STATIC_KEY: u32 = 0xffff0000u;
+// Neighbour visits the serial completion of the colouring may make per world (mod.rs SERIAL_VISITS).
+const SERIAL_VISITS: u32 = 24576u;
 
 fn class_of(i: u32) -> u32 {
     return rules[i];
@@ -180,13 +182,13 @@ fn near_scan(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) w
     }
 }
 
-fn emit(w: u32, k: u32, t: u32, a: u32, b: u32, key: u32) {
-    if (k < cp.cap) {
+fn emit(w: u32, k: u32, end: u32, t: u32, a: u32, b: u32, key: u32) {
+    if (k < min(end, cp.cap)) {
         var p = templates[t];
         p.body_a = a;
         p.body_b = b;
         p.job_first = key;
-        p._pad1 = bitcast<f32>(t);
+        p.crowd_template = t;
         crowd_pairs[w * cp.cap + k] = p;
         store(m_colour(w) + k, UNCOLOURED);
         store(m_candidates(w) + k, 0u);
@@ -204,20 +206,26 @@ fn near_emit(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     var k = load(m_off_a(w) + i);
+    // The range near_count counted: the same test must give the same answer here, or the world is
+    // flagged (never stepped with a gap in its list).
+    let end = k + load(m_count_a(w) + i);
     let ci = class_of(i);
     for (var j = i + 1u; j < cp.body_count; j++) {
         let t = body_rule(ci, class_of(j));
         if (t != NONE && near(t, i, j, w)) {
-            emit(w, k, t, i, j, j);
+            emit(w, k, end, t, i, j, j);
             k += 1u;
         }
     }
     for (var s = 0u; s < cp.static_count; s++) {
         let t = static_rule(s, ci);
         if (t != NONE && near(t, i, NONE, w)) {
-            emit(w, k, t, i, NONE, STATIC_KEY + s);
+            emit(w, k, end, t, i, NONE, STATIC_KEY + s);
             k += 1u;
         }
+    }
+    if (k != end) {
+        atomicOr(&crowd_meta[meta_base(w) + M_FLAGS], FLAG_RECOUNT);
     }
 }
 
@@ -252,16 +260,20 @@ fn incidence(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     var k = load(m_off_b(w) + j);
+    let end = k + load(m_count_b(w) + j);
     let cj = class_of(j);
     for (var i = 0u; i < j; i++) {
         let t = body_rule(class_of(i), cj);
         if (t != NONE && near(t, i, j, w)) {
             let e = find_pair(w, i, j);
-            if (k < cp.cap && e != NONE) {
+            if (k < min(end, cp.cap) && e != NONE) {
                 store(m_blist(w) + k, e);
             }
             k += 1u;
         }
+    }
+    if (k != end) {
+        atomicOr(&crowd_meta[meta_base(w) + M_FLAGS], FLAG_RECOUNT);
     }
 }
 
@@ -277,9 +289,13 @@ fn priority(a: u32, b: u32) -> u32 {
 }
 
 // Neighbour f of pair e in round r: x = 1 if f, uncoloured at the round's start, outranks e; else y = the
-// bit of f's colour (0 if f is uncoloured or found none).
+// bit of f's colour (0 if f is uncoloured or found none). r = NONE: the serial completion, where only
+// colours count.
 fn neighbour(w: u32, f: u32, e: u32, pe: u32, r: u32) -> vec2<u32> {
     let v = load(m_colour(w) + f);
+    if (r == NONE && v == UNCOLOURED) {
+        return vec2<u32>(0u, 0u); // the serial completion (colour_sort): uncoloured neighbours block nothing
+    }
     if (v == UNCOLOURED || (v >> 8u) == r) {
         let g = w * cp.cap + f;
         let pf = priority(crowd_pairs[g].body_a, crowd_pairs[g].body_b);
@@ -368,6 +384,40 @@ fn colour_sort(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let n = load(meta_base(w) + M_COUNT);
+    // Pairs the rounds left uncoloured are coloured here one after another in list order (greedy: the
+    // lowest colour their neighbours leave free), within a budget of neighbour visits (lavapipe's loop
+    // passes); the CPU twin does the same.
+    if ((load(meta_base(w) + M_FLAGS) & FLAG_PAIRS) == 0u) {
+        var visits = 0u;
+        for (var e = 0u; e < n; e++) {
+            if (load(m_colour(w) + e) != UNCOLOURED) {
+                continue;
+            }
+            let g = w * cp.cap + e;
+            let a = crowd_pairs[g].body_a;
+            let b = crowd_pairs[g].body_b;
+            // Its neighbours, plus the 4 loop exits of its two scans.
+            var cost = 4u + load(m_count_a(w) + a) + load(m_count_b(w) + a);
+            if (b != NONE) {
+                cost += load(m_count_a(w) + b) + load(m_count_b(w) + b);
+            }
+            if (visits + cost > SERIAL_VISITS) {
+                break;
+            }
+            visits += cost;
+            var used = scan_body(w, a, e, 0u, NONE).y;
+            if (b != NONE) {
+                used |= scan_body(w, b, e, 0u, NONE).y;
+            }
+            let c = countTrailingZeros(~used);
+            if (c >= cp.max_colours) {
+                atomicOr(&crowd_meta[meta_base(w) + M_FLAGS], FLAG_COLOURS);
+                store(m_colour(w) + e, COLOUR_NONE);
+            } else {
+                store(m_colour(w) + e, c);
+            }
+        }
+    }
     var cnt: array<u32, 32>;
     var incomplete = false;
     for (var e = 0u; e < n; e++) {
@@ -401,7 +451,12 @@ fn colour_sort(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     store(meta_base(w) + M_COLOURS, used);
-    if (incomplete) {
-        atomicOr(&crowd_meta[meta_base(w) + M_FLAGS], FLAG_ROUNDS);
+    // The flags the CPU twin raises, in its order: an overfull list is not coloured (so not flagged for
+    // rounds), and the patch budget counts only for a world coloured in full.
+    let flags = load(meta_base(w) + M_FLAGS);
+    var out = flags | select(0u, FLAG_ROUNDS, incomplete && (flags & FLAG_PAIRS) == 0u);
+    if ((out & (FLAG_PAIRS | FLAG_COLOURS | FLAG_ROUNDS)) != 0u) {
+        out &= ~FLAG_PATCHES;
     }
+    store(meta_base(w) + M_FLAGS, out);
 }

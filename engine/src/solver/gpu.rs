@@ -163,6 +163,26 @@ pub struct GpuSolver {
     groups: [wgpu::BindGroup; 3],
     world_count: u32,
     body_count: u32,
+    /// Rows per world (4 per patch slot of every pair).
+    max_rows: u32,
+}
+
+/// Writes the poses and velocities of world `world` (shape [body_count] each) into `body_q` and `body_qd`
+/// (laid out [world_count * body_count], velocities as two vec4 per body).
+pub(crate) fn write_world_bodies(
+    gpu: &GpuContext,
+    body_q: &wgpu::Buffer,
+    body_qd: &wgpu::Buffer,
+    world: u32,
+    q: &[crate::contact::TransformGpu],
+    qd: &[[glam::Vec3; 2]],
+) {
+    let n = q.len() as u64;
+    let v: Vec<[f32; 4]> = qd.iter().flat_map(|v| [v[0].extend(0.0).to_array(), v[1].extend(0.0).to_array()]).collect();
+    if n > 0 {
+        gpu.queue.write_buffer(body_q, world as u64 * n * 32, bytemuck::cast_slice(q));
+        gpu.queue.write_buffer(body_qd, world as u64 * n * 32, bytemuck::cast_slice(&v));
+    }
 }
 
 impl GpuSolver {
@@ -250,6 +270,7 @@ impl GpuSolver {
             groups,
             world_count,
             body_count: contacts.body_count,
+            max_rows,
         })
     }
 
@@ -272,6 +293,29 @@ impl GpuSolver {
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.scratch, 0, Some(status));
         enc.clear_buffer(&self.scratch, status + control, None);
+        gpu.queue.submit([enc.finish()]);
+    }
+
+    /// Resets world `world` alone (the auto-reset of one finished or diverged world): its poses and
+    /// velocities (shape [body_count] each), its status and its warm-start rows; every other world, and
+    /// the external wrenches, stay as they are.
+    pub fn reset_world(
+        &self,
+        gpu: &GpuContext,
+        contacts: &ContactPipeline,
+        world: u32,
+        body_q: &[crate::contact::TransformGpu],
+        body_qd: &[[glam::Vec3; 2]],
+    ) {
+        assert!(world < self.world_count, "world {world} of {}", self.world_count);
+        let n = self.body_count as usize;
+        assert!(body_q.len() == n && body_qd.len() == n, "one world's bodies: shape [body_count = {n}]");
+        write_world_bodies(gpu, &contacts.body_q, &self.body_qd, world, body_q, body_qd);
+        let (status, control) = self.control_range();
+        let rows = self.max_rows as u64 * 4 * 16;
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(&self.scratch, world as u64 * 16, Some(16));
+        enc.clear_buffer(&self.scratch, status + control + world as u64 * rows, Some(rows));
         gpu.queue.submit([enc.finish()]);
     }
 

@@ -5,7 +5,7 @@
 // the position sweeps and once for the velocity sweeps).
 //
 // On a GPU one invocation per world keeps a warp busy with 32 worlds: fine for the thousands of worlds of
-// RL training, poor for one world with many contacts (graph colouring would be the next step there).
+// RL training, poor for one world with many contacts: that is crowd/solve.wgsl (graph-coloured pairs).
 
 @group(0) @binding(0) var<uniform> sp: SolverParams;
 @group(0) @binding(1) var<storage, read> pairs: array<Pair>;
