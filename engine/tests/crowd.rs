@@ -19,15 +19,19 @@ const DENSITY: f32 = 7850.0;
 const OFFSET: f32 = 0.005;
 /// Half extents of every box [m].
 const H: Vec3 = Vec3::new(0.02, 0.015, 0.01);
-/// GPU against the CPU twin, one frame from the same poses (each with its own warm-start rows): the same
-/// sweeps in the same order, so they differ by f32 rounding (fused multiply-adds, lavapipe's
-/// reassociation) only [m], [m/s] (as bench/tests/piles.rs).
-/// A warm-start match at its distance threshold can go one way on the GPU and the other on the CPU (each
-/// keeps its own rows), and a row then starts from other impulses: measured 2026-12-01 once in 40 frames,
-/// 2.5e-6 m; the median frame agrees to 1.4e-8 m.
-const PARITY_TOL: f32 = 5e-6;
+/// GPU against the CPU twin, one frame from the same poses: the same sweeps in the same order, so they
+/// differ by f32 rounding (fused multiply-adds, lavapipe's reassociation) only; but a box lying flat has
+/// four equally deep corners, and which of them takes a patch slot is decided by that rounding, so a
+/// frame can end a few micrometres apart (measured 2026-12-01: at most 3.7e-6 m) [m], [m/s] ...
+const PARITY_TOL: f32 = 1e-5;
+/// ... (and velocities up to 1.8e-3 m/s) [m/s] ...
+const PARITY_VEL_TOL: f32 = 5e-3;
+/// ... while the median frame agrees to rounding [m]. Warm-started, each side keeps its own rows (they
+/// cannot be re-synchronised), and one warm-start match at its distance threshold going the other way
+/// carries other impulses for about a dozen frames: measured 2026-12-01, 6.6e-6 m growing to 5.7e-5 m
+/// and back over frames 47-58 of 60 (median 2e-8 m) [m].
 const PARITY_MEDIAN_TOL: f32 = 2e-7;
-const PARITY_VEL_TOL: f32 = 2e-4;
+const PARITY_WARM_TOL: f32 = 2e-4;
 
 fn gpu() -> &'static GpuContext {
     GpuContext::global().unwrap()
@@ -120,7 +124,11 @@ fn near_pairs_and_colours(rounds: u32) {
         assert_eq!(f.colour_count, count);
         if rounds < 10 {
             // The rounds alone did not finish: all rounds give another colouring.
-            assert_ne!(colours, colour_pairs(&pairs, n, cfg.max_colours, 1000).0, "world {w}: the serial completion ran");
+            assert_ne!(
+                colours,
+                colour_pairs(&pairs, n, cfg.max_colours, 1000).0,
+                "world {w}: the serial completion ran"
+            );
         }
         // A proper colouring: two pairs that share a body never share a colour.
         for (i, p) in pairs.iter().enumerate() {
@@ -160,12 +168,16 @@ fn falling_boxes(n: u32) -> (CrowdModel, BodyModel, BodyState) {
     (model, bodies, at_rest(jumble(n, 0.08, 11)))
 }
 
+/// Frames of landing (stepped cold) and of resting (warm) in the parity test.
+const LANDING: u32 = 30;
+const RESTING: u32 = 30;
+
 /// Two layers of six boxes, 2 mm apart side by side and 0.5 mm above what carries them, settling onto the
 /// table and each other: resting contacts that last from frame to frame, so warm starting matters. Landing
 /// is chaotic (which of four equally deep corners wins a patch slot is decided by rounding): free runs of
 /// the GPU and the CPU twin part ways, 1e-8 m becoming 5e-5 m within 3 frames (measured 2026-12-01), so the
-/// CPU twin is re-synchronised to the GPU's poses every frame; one frame from the same poses they agree
-/// to 5e-7 m.
+/// CPU twin is re-synchronised to the GPU's poses every frame: landing frames cold on both sides, resting
+/// frames warm-started, each side from its own rows (see PARITY_WARM_TOL).
 fn stacked_boxes() -> (CrowdModel, BodyModel, BodyState) {
     let (model, bodies) = box_model(12, 0.5);
     let mut q = Vec::new();
@@ -193,8 +205,14 @@ fn coloured_gpu_step_matches_the_cpu_twin() {
     let mut cpu = CrowdCpu::new(&model, &bodies, &cfg, &contact, &solver).unwrap();
     pipe.write_state(gpu(), &start);
     let mut state = start.clone();
-    let (mut worst, mut touching, mut diffs) = (0.0f32, 0, Vec::new());
-    for frame in 0..40 {
+    let (mut touching, mut cold, mut warm) = (0, Vec::new(), Vec::new());
+    for frame in 0..LANDING + RESTING {
+        let landing = frame < LANDING;
+        if landing {
+            // Landing: both sides cold, from the same poses (see stacked_boxes).
+            pipe.write_state(gpu(), &state);
+            cpu.forget_warm_start();
+        }
         pipe.submit_frame(gpu());
         let (g, ok) = pipe.read_state(gpu());
         let c = cpu.step(&mut state, &Control::default());
@@ -204,26 +222,41 @@ fn coloured_gpu_step_matches_the_cpu_twin() {
         assert_eq!(gf.colours, c[0].0.colours, "frame {frame}: colours");
         touching = touching.max(pipe.read_stats(gpu())[0].touching_pairs);
         let d = max_distance(&g, &state);
-        worst = worst.max(d);
-        diffs.push(d);
-        assert!(d < PARITY_TOL, "frame {frame}: GPU and CPU twin {d} m apart");
         let dv = g.body_qd.iter().zip(&state.body_qd).map(|(a, b)| (a[0] - b[0]).length()).fold(0.0f32, f32::max);
-        assert!(dv < PARITY_VEL_TOL, "frame {frame}: velocities {dv} m/s apart");
-        // Each side keeps its own rows for the warm start; the poses are re-synchronised (see above).
+        let tol = if landing { PARITY_TOL } else { PARITY_WARM_TOL };
+        assert!(d < tol, "frame {frame} ({}): GPU and CPU twin {d} m apart", if landing { "cold" } else { "warm" });
+        assert!(
+            dv < if landing { PARITY_VEL_TOL } else { 10.0 * PARITY_VEL_TOL },
+            "frame {frame}: velocities {dv} m/s apart"
+        );
+        if landing {
+            cold.push(d)
+        } else {
+            warm.push(d)
+        }
+        // Resting: each side keeps its own rows for the warm start; only the poses are re-synchronised.
         state = g;
     }
-    diffs.sort_by(f32::total_cmp);
-    let median = diffs[diffs.len() / 2];
-    println!("coloured step: GPU vs CPU twin at most {worst:.3e} m (median {median:.3e} m) apart per frame over 40 frames; up to {touching} pairs touching");
-    assert!(median < PARITY_MEDIAN_TOL, "median frame {median} m apart");
+    let worst = |v: &[f32]| v.iter().copied().fold(0.0f32, f32::max);
+    let median = |v: &mut Vec<f32>| {
+        v.sort_by(f32::total_cmp);
+        v[v.len() / 2]
+    };
+    let (mc, mw) = (median(&mut cold), median(&mut warm));
+    println!(
+        "coloured step, GPU vs CPU twin per frame: landing (cold) at most {:.3e} m (median {mc:.1e}), resting (warm) at most {:.3e} m (median {mw:.1e}); up to {touching} pairs touching",
+        worst(&cold),
+        worst(&warm)
+    );
+    assert!(mc < PARITY_MEDIAN_TOL && mw < PARITY_MEDIAN_TOL, "median frames {mc} and {mw} m apart");
     assert!(touching >= 12, "the boxes rest on the table and on each other ({touching} pairs touching)");
     // Warm starting is at work: the same frame stepped cold from the same state ends elsewhere.
     let (now, _) = pipe.read_state(gpu());
-    let cold = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
-    cold.write_state(gpu(), &now);
-    cold.submit_frame(gpu());
+    let fresh = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
+    fresh.write_state(gpu(), &now);
+    fresh.submit_frame(gpu());
     pipe.submit_frame(gpu());
-    let (a, b) = (pipe.read_state(gpu()).0, cold.read_state(gpu()).0);
+    let (a, b) = (pipe.read_state(gpu()).0, fresh.read_state(gpu()).0);
     let bits = |s: &BodyState| -> Vec<u32> { bytemuck::cast_slice::<TransformGpu, u32>(&s.body_q).to_vec() };
     assert_ne!(bits(&a), bits(&b), "warm and cold steps differ: rows found last frame's impulses");
 }

@@ -135,13 +135,30 @@ fn bounding_sphere(points: impl Iterator<Item = Vec3> + Clone, pad: f32) -> [f32
 
 impl SdfShape {
     /// Bounding sphere of the shape's surface in its frame (centre xyz, radius w [m]); w = [`UNBOUNDED`]
-    /// for the plane and the thread. A grid's is its whole box: the field outside is not sampled.
+    /// for the plane and the thread. A grid's covers its samples within one spacing h of the surface,
+    /// grown by h: every surface point lies within h sqrt(3)/2 of such a sample, and farther out the
+    /// field (within its interpolation slack inside the box, the box value plus the distance to the box
+    /// outside it) exceeds the distance to this sphere. The grid's whole box, which it replaced, was 47%
+    /// wider for a pile's M16 nut (22.5 against 15.3 mm) and listed twice as many near pairs in a pile.
     pub fn bound(&self) -> [f32; 4] {
         match self {
             SdfShape::Plane | SdfShape::Thread(_) => [0.0, 0.0, 0.0, UNBOUNDED],
             SdfShape::Grid(g) => {
-                let hi = g.origin + (g.dims.as_vec3() - Vec3::ONE) * g.spacing;
-                bounding_sphere([g.origin, hi].into_iter(), 0.0)
+                let h = g.spacing;
+                let near = (0..g.dims.z).flat_map(move |k| {
+                    (0..g.dims.y).flat_map(move |j| {
+                        (0..g.dims.x).filter_map(move |i| {
+                            (g.values[g.index(i, j, k)].abs() <= h)
+                                .then(|| g.origin + Vec3::new(i as f32, j as f32, k as f32) * h)
+                        })
+                    })
+                });
+                if near.clone().next().is_none() {
+                    // No surface sampled (a degenerate grid): the whole box.
+                    let hi = g.origin + (g.dims.as_vec3() - Vec3::ONE) * h;
+                    return bounding_sphere([g.origin, hi].into_iter(), 0.0);
+                }
+                bounding_sphere(near, h)
             }
             SdfShape::Revolved(r) => {
                 // The profile's box revolved: a cylinder, whose bounding sphere is centred on the axis.
@@ -233,6 +250,7 @@ impl ContactModel {
         let mut flat = FlatModel::default();
         let mut query_first: Vec<(*const QueryShape, u32)> = Vec::new();
         let mut grid_offset: Vec<(*const SdfGrid, u32)> = Vec::new();
+        let mut grid_bound: Vec<(*const SdfGrid, [f32; 4])> = Vec::new();
         for (i, p) in self.pairs.iter().enumerate() {
             for (field, body) in [("body_a", p.body_a), ("body_b", p.body_b)] {
                 if body != NO_BODY && body >= self.body_count {
@@ -341,7 +359,21 @@ impl ContactModel {
                 crowd_template: 0,
                 _pad: [0.0; 2],
                 a_bound: bounding_sphere(p.query.triangles.iter().flatten().copied(), p.query.radius),
-                b_bound: p.sdf.bound(),
+                b_bound: match &p.sdf {
+                    // Shared grids (a pile's parts) are scanned once.
+                    SdfShape::Grid(g) => {
+                        let key = Arc::as_ptr(g);
+                        match grid_bound.iter().find(|(k, _)| *k == key) {
+                            Some(&(_, b)) => b,
+                            None => {
+                                let b = p.sdf.bound();
+                                grid_bound.push((key, b));
+                                b
+                            }
+                        }
+                    }
+                    other => other.bound(),
+                },
             });
         }
         if flat.tri_verts.is_empty() {

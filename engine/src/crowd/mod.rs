@@ -172,9 +172,9 @@ pub struct CrowdConfig {
 }
 
 impl CrowdConfig {
-    /// Room for `bodies` bodies with about 8 near pairs each and 8 patches per pair.
+    /// Room for `bodies` bodies with about 10 near pairs each (at most 10000) and 8 patches per pair.
     pub fn for_bodies(bodies: u32) -> Self {
-        let max_pairs = (8 * bodies).clamp(64, 10_000);
+        let max_pairs = (10 * bodies).clamp(64, 10_000);
         CrowdConfig { max_pairs, max_colours: 32, colour_rounds: 64, max_patches_per_world: 8 * max_pairs }
     }
 
