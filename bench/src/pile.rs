@@ -258,6 +258,9 @@ pub struct PileReport {
     pub max_energy_gain: f64,
     /// Fastest body at the last frame [m/s] ...
     pub final_max_speed_m_s: f64,
+    /// ... the median over the last second's frames of the fastest body's speed (a pile at rest may show a
+    /// single frame's jitter; this is its typical speed) [m/s] ...
+    pub last_second_median_max_speed_m_s: f64,
     /// ... and the farthest any body's centre of mass moved over the last second (or the whole run if
     /// shorter) [mm]: a pile at rest jitters in place, it does not creep.
     pub last_second_max_drift_mm: f64,
@@ -322,6 +325,10 @@ struct Tally {
     last: BodyState,
     frames: u32,
     second_before_end: u32,
+    /// Frames done.
+    frame: u32,
+    /// The fastest body's speed at each frame end of the last second [m/s].
+    last_second_speeds: Vec<f64>,
 }
 
 impl Tally {
@@ -347,6 +354,8 @@ impl Tally {
             last: state.clone(),
             frames,
             second_before_end: frames.saturating_sub((1.0 / run.solver.dt).round() as u32),
+            frame: 0,
+            last_second_speeds: Vec::new(),
         }
     }
 
@@ -369,7 +378,12 @@ impl Tally {
         let finite = |v: Vec3| v.is_finite();
         self.finite &= s.body_q.iter().all(|t| t.p.iter().chain(&t.q).all(|x| x.is_finite()))
             && s.body_qd.iter().all(|v| finite(v[0]) && finite(v[1]));
-        self.max_speed = self.max_speed.max(s.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64);
+        let fastest = s.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64;
+        self.max_speed = self.max_speed.max(fastest);
+        if self.frame >= self.second_before_end {
+            self.last_second_speeds.push(fastest);
+        }
+        self.frame += 1;
         self.max_energy = self.max_energy.max(total_energy(scene, &s));
         self.last = s;
     }
@@ -438,6 +452,11 @@ fn report(
             .fold(0.0f32, f32::max) as f64
             * 1e3,
         final_max_speed_m_s: t.last.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64,
+        last_second_median_max_speed_m_s: {
+            let mut v = t.last_second_speeds.clone();
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied().unwrap_or(0.0)
+        },
         max_penetration_mm: (-t.deepest as f64 * 1e3).max(0.0),
         finite: t.finite,
         over_loop_budget: t.over,

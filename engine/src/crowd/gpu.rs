@@ -151,7 +151,24 @@ impl CrowdPipeline {
         cfg.validate()?;
         solver.validate()?;
         bodies.validate()?;
-        let flat = CrowdFlat::new(model, contact)?;
+        let mut flat = CrowdFlat::new(model, contact)?;
+        // Short jobs cull well, but each holds a patch budget of its own: with the default chunk, longer
+        // jobs until the per-job patches fit one binding (an M16 nut's 2872 triangles: 12 jobs of 256 for
+        // 10000 pairs would need 154 MB, 6 of 512 fit).
+        let job_bytes = |f: &CrowdFlat| {
+            world_count as u64
+                * cfg.max_pairs as u64
+                * f.jobs_per_pair as u64
+                * contact.max_patches as u64
+                * std::mem::size_of::<PatchGpu>() as u64
+        };
+        while contact.chunk_triangles == 0
+            && job_bytes(&flat) > gpu.limits().max_storage_buffer_binding_size
+            && flat.jobs_per_pair > 1
+            && 2 * flat.chunk <= contact.max_chunk_triangles()
+        {
+            flat = CrowdFlat::new(model, &ContactConfig { chunk_triangles: 2 * flat.chunk, ..contact.clone() })?;
+        }
         let n = model.body_count;
         if bodies.body_count() as u32 != n {
             return Err(EngineError::Config {
@@ -443,22 +460,12 @@ impl CrowdPipeline {
     }
 
     fn control_range(&self) -> (u64, u64) {
-        (self.world_count as u64 * 16, self.world_count as u64 * self.body_count as u64 * 32)
+        crate::solver::gpu::control_range(self.world_count, self.body_count)
     }
 
     /// Sets the external wrenches (as [`crate::solver::gpu::GpuSolver::write_control`]).
     pub fn write_control(&self, gpu: &GpuContext, control: &Control) {
-        let (offset, size) = self.control_range();
-        if control.body_f.is_empty() {
-            let mut enc = gpu.device.create_command_encoder(&Default::default());
-            enc.clear_buffer(&self.scratch, offset, Some(size));
-            gpu.queue.submit([enc.finish()]);
-            return;
-        }
-        assert_eq!(control.body_f.len() as u64 * 32, size, "Control::body_f shape [world_count * body_count]");
-        let f: Vec<[f32; 4]> =
-            control.body_f.iter().flat_map(|w| [w[0].extend(0.0).to_array(), w[1].extend(0.0).to_array()]).collect();
-        gpu.queue.write_buffer(&self.scratch, offset, bytemuck::cast_slice(&f));
+        crate::solver::gpu::write_wrenches(gpu, &self.scratch, self.control_range(), control);
     }
 
     fn pass_offset(&self, slot: u32) -> u32 {

@@ -479,6 +479,8 @@ pub fn colour_pairs(pairs: &[NearPair], body_count: u32, max_colours: u32, round
 
 /// The CPU reference of [`gpu::CrowdPipeline`]: the same near pairs, colours, contacts and a Gauss-Seidel
 /// step over the pairs in colour order, world by world.
+/// (A pipeline whose per-job patches would not fit one binding lengthens its jobs; its twin then takes
+/// `ContactConfig { chunk_triangles: pipeline.flat.chunk, .. }`.)
 pub struct CrowdCpu {
     pub flat: CrowdFlat,
     pub cfg: CrowdConfig,
@@ -502,6 +504,13 @@ impl CrowdCpu {
         cfg.validate()?;
         solver.validate()?;
         bodies.validate()?;
+        if bodies.body_count() as u32 != model.body_count {
+            return Err(EngineError::Config {
+                field: "body_count",
+                value: bodies.body_count().to_string(),
+                expected: format!("the crowd model's {} bodies", model.body_count),
+            });
+        }
         let flat = CrowdFlat::new(model, contact)?;
         let world_flat = FlatModel {
             pairs: Vec::new(),

@@ -167,6 +167,26 @@ pub struct GpuSolver {
     max_rows: u32,
 }
 
+/// Byte offset and size of the external wrenches in a solver scratch buffer (status per world first,
+/// then two vec4 per body; solver.wgsl's control_index).
+pub(crate) fn control_range(world_count: u32, body_count: u32) -> (u64, u64) {
+    (world_count as u64 * 16, world_count as u64 * body_count as u64 * 32)
+}
+
+/// Writes `control`'s wrenches into `scratch` at `(offset, size)` (an empty control clears them).
+pub(crate) fn write_wrenches(gpu: &GpuContext, scratch: &wgpu::Buffer, (offset, size): (u64, u64), control: &Control) {
+    if control.body_f.is_empty() {
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(scratch, offset, Some(size));
+        gpu.queue.submit([enc.finish()]);
+        return;
+    }
+    assert_eq!(control.body_f.len() as u64 * 32, size, "Control::body_f shape [world_count * body_count]");
+    let f: Vec<[f32; 4]> =
+        control.body_f.iter().flat_map(|w| [w[0].extend(0.0).to_array(), w[1].extend(0.0).to_array()]).collect();
+    gpu.queue.write_buffer(scratch, offset, bytemuck::cast_slice(&f));
+}
+
 /// Writes the poses and velocities of world `world` (shape [body_count] each) into `body_q` and `body_qd`
 /// (laid out [world_count * body_count], velocities as two vec4 per body).
 pub(crate) fn write_world_bodies(
@@ -319,25 +339,14 @@ impl GpuSolver {
         gpu.queue.submit([enc.finish()]);
     }
 
-    /// Byte offset and size of the external wrenches in the scratch buffer (solver.wgsl's control_index).
     fn control_range(&self) -> (u64, u64) {
-        (self.world_count as u64 * 16, self.world_count as u64 * self.body_count as u64 * 32)
+        control_range(self.world_count, self.body_count)
     }
 
     /// Sets the external wrenches applied from the next step on (they stay until set again). An empty
     /// `control` clears them; otherwise `body_f` must have world_count * body_count entries.
     pub fn write_control(&self, gpu: &GpuContext, control: &Control) {
-        let (offset, size) = self.control_range();
-        if control.body_f.is_empty() {
-            let mut enc = gpu.device.create_command_encoder(&Default::default());
-            enc.clear_buffer(&self.scratch, offset, Some(size));
-            gpu.queue.submit([enc.finish()]);
-            return;
-        }
-        assert_eq!(control.body_f.len() as u64 * 32, size, "Control::body_f shape [world_count * body_count]");
-        let f: Vec<[f32; 4]> =
-            control.body_f.iter().flat_map(|w| [w[0].extend(0.0).to_array(), w[1].extend(0.0).to_array()]).collect();
-        gpu.queue.write_buffer(&self.scratch, offset, bytemuck::cast_slice(&f));
+        write_wrenches(gpu, &self.scratch, self.control_range(), control);
     }
 
     /// Records one solver step (after the contact pipeline's dispatches of the same frame).
