@@ -491,12 +491,12 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
         pipe.submit_frame(gpu);
         gpu.wait();
         t.wall += clock.elapsed().as_secs_f64();
-        let deepest = pipe
-            .read_patches(gpu)
+        let (frames, patches): (Vec<_>, Vec<_>) = pipe.read_patches(gpu).into_iter().unzip();
+        let deepest = patches
             .iter()
-            .flat_map(|w| w.iter().flat_map(|(_, ps)| ps.iter().flat_map(|p| p.contacts.iter().map(|c| c.depth))))
+            .flatten()
+            .flat_map(|ps| ps.iter().flat_map(|p| p.contacts.iter().map(|c| c.depth)))
             .reduce(f32::min);
-        let frames = pipe.read_frames(gpu);
         if run.bodies >= 256 && (f + 1) % 30 == 0 {
             // Long runs say how far they are (stderr: the report on stdout stays one JSON object).
             eprintln!(
@@ -513,14 +513,16 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
         t.after(scene, s, flags != 0, flags, deepest);
     }
     let stats = pipe.read_stats(gpu);
-    let world0 = &pipe.read_patches(gpu)[0];
+    let (frame0, patches0) = &pipe.read_patches(gpu)[0];
     let c = LastContacts {
         candidates: stats.iter().map(|s| s.candidates).sum(),
         contacts: stats.iter().map(|s| s.contacts as u64).sum(),
         patches: stats.iter().map(|s| s.patches as u64).sum(),
         touching: stats.iter().map(|s| s.touching_pairs as u64).sum(),
-        resting_body_pairs: world0
+        resting_body_pairs: frame0
+            .pairs
             .iter()
+            .zip(patches0)
             .filter(|(np, ps)| np.b != NO_BODY && ps.iter().any(|p| p.contacts.iter().any(|k| k.depth <= 0.5e-3)))
             .count() as u64,
         near_pairs: stats[0].pairs as u64,

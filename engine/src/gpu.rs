@@ -172,6 +172,16 @@ impl GpuContext {
         })
     }
 
+    /// A uniform buffer holding `bytes`.
+    pub fn uniform_buffer(&self, label: &str, bytes: &[u8]) -> wgpu::Buffer {
+        use wgpu::util::DeviceExt;
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytes,
+            usage: wgpu::BufferUsages::UNIFORM,
+        })
+    }
+
     /// An uninitialised (zeroed) storage buffer of `bytes` bytes.
     pub fn storage_buffer_zeroed(&self, label: &str, bytes: u64) -> wgpu::Buffer {
         self.device.create_buffer(&wgpu::BufferDescriptor {
@@ -387,4 +397,17 @@ pub enum Binding {
 pub struct ExplicitLayout {
     pub groups: Vec<wgpu::BindGroupLayout>,
     pub pipeline: wgpu::PipelineLayout,
+}
+
+/// Pairs of 3-vectors (a body's linear and angular velocity, a force and a torque) as the kernels store
+/// them: two vec4 each, w unused.
+pub fn pack_vec3_pairs(v: &[[glam::Vec3; 2]]) -> Vec<[f32; 4]> {
+    v.iter().flat_map(|v| [v[0].extend(0.0).to_array(), v[1].extend(0.0).to_array()]).collect()
+}
+
+/// The inverse of [`pack_vec3_pairs`].
+pub fn unpack_vec3_pairs(v: &[[f32; 4]]) -> Vec<[glam::Vec3; 2]> {
+    v.chunks_exact(2)
+        .map(|p| [glam::Vec4::from_array(p[0]).truncate(), glam::Vec4::from_array(p[1]).truncate()])
+        .collect()
 }

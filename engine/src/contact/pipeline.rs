@@ -167,14 +167,7 @@ impl ContactPipeline {
         }
         let dev = &gpu.device;
         let none = wgpu::BufferUsages::empty();
-        let uniform = {
-            use wgpu::util::DeviceExt;
-            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("contact-params"),
-                contents: bytemuck::bytes_of(&p),
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
-        };
+        let uniform = gpu.uniform_buffer("contact-params", bytemuck::bytes_of(&p));
         let pairs = gpu.storage_buffer("pairs", &flat.pairs, none);
         let jobs = gpu.storage_buffer("jobs", &flat.jobs, none);
         let tri_verts = gpu.storage_buffer("tri_verts", &flat.tri_verts, none);

@@ -38,6 +38,11 @@ const M_COUNT: usize = 0;
 const M_FLAGS: usize = 1;
 const M_COLOURS: usize = 3;
 const M_PATCHES: usize = 4;
+/// Per-pair arrays of a world's meta block, by their place after the per-body arrays
+/// (crowd_common.wgsl's m_colour, m_patch_count, m_candidates).
+const P_COLOUR: u32 = 1;
+const P_PATCH_COUNT: u32 = 5;
+const P_CANDIDATES: u32 = 6;
 /// Indirect arguments (crowd_common.wgsl's A_*): pairs, generate, merge, then 32 colours.
 const A_PAIRS: u64 = 0;
 const A_GENERATE: u64 = 3;
@@ -91,10 +96,6 @@ pub struct CrowdStats {
     pub flags: u32,
 }
 
-struct Kernel {
-    pipeline: wgpu::ComputePipeline,
-}
-
 /// Buffers and pipelines of many-body worlds (see the module doc of [`super`]).
 pub struct CrowdPipeline {
     pub flat: CrowdFlat,
@@ -118,10 +119,10 @@ pub struct CrowdPipeline {
     pub patches: wgpu::Buffer,
     args: wgpu::Buffer,
     pass_stride: u64,
-    near: [Kernel; 7],
-    contacts: [Kernel; 2],
-    merge: Kernel,
-    solve: [Kernel; 5],
+    near: [wgpu::ComputePipeline; 7],
+    contacts: [wgpu::ComputePipeline; 2],
+    merge: wgpu::ComputePipeline,
+    solve: [wgpu::ComputePipeline; 5],
     near_groups: Vec<wgpu::BindGroup>,
     round_groups: Vec<wgpu::BindGroup>,
     contact_groups: Vec<wgpu::BindGroup>,
@@ -148,9 +149,7 @@ impl CrowdPipeline {
         contact: &ContactConfig,
         solver: &SolverConfig,
     ) -> Result<Self> {
-        cfg.validate()?;
-        solver.validate()?;
-        bodies.validate()?;
+        super::check_setup(model, bodies, cfg, solver)?;
         let mut flat = CrowdFlat::new(model, contact)?;
         // Short jobs cull well, but each holds a patch budget of its own: with the default chunk, longer
         // jobs until the per-job patches fit one binding (an M16 nut's 2872 triangles: 12 jobs of 256 for
@@ -170,13 +169,6 @@ impl CrowdPipeline {
             flat = CrowdFlat::new(model, &ContactConfig { chunk_triangles: 2 * flat.chunk, ..contact.clone() })?;
         }
         let n = model.body_count;
-        if bodies.body_count() as u32 != n {
-            return Err(EngineError::Config {
-                field: "body_count",
-                value: bodies.body_count().to_string(),
-                expected: format!("the crowd model's {n} bodies"),
-            });
-        }
         let limits = gpu.limits();
         let max_dim = limits.max_compute_workgroups_per_dimension;
         if world_count == 0 || world_count > max_dim {
@@ -260,17 +252,9 @@ impl CrowdPipeline {
         };
         let sp = solver_params(solver, bodies, world_count, cfg.max_pairs, cfg.max_patches_per_world * 4, 0);
         let dev = &gpu.device;
-        let uniform = |label: &str, bytes: &[u8]| {
-            use wgpu::util::DeviceExt;
-            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents: bytes,
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
-        };
-        let cp_buf = uniform("crowd-params", bytemuck::bytes_of(&params));
-        let contact_buf = uniform("crowd-contact-params", bytemuck::bytes_of(&contact_params));
-        let sp_buf = uniform("crowd-solver-params", bytemuck::bytes_of(&sp));
+        let cp_buf = gpu.uniform_buffer("crowd-params", bytemuck::bytes_of(&params));
+        let contact_buf = gpu.uniform_buffer("crowd-contact-params", bytemuck::bytes_of(&contact_params));
+        let sp_buf = gpu.uniform_buffer("crowd-solver-params", bytemuck::bytes_of(&sp));
         // Per-dispatch parameters: the colouring rounds, then 5 solver phases x 32 colours.
         let pass_stride = (limits.min_uniform_buffer_offset_alignment as u64).max(16);
         let mut passes = Vec::new();
@@ -287,7 +271,7 @@ impl CrowdPipeline {
             let at = i * pass_stride as usize;
             pass_bytes[at..at + 16].copy_from_slice(bytemuck::bytes_of(p));
         }
-        let pass_buf = uniform("crowd-passes", &pass_bytes);
+        let pass_buf = gpu.uniform_buffer("crowd-passes", &pass_bytes);
 
         let none = wgpu::BufferUsages::empty();
         let templates = gpu.storage_buffer("crowd-templates", &flat.flat.pairs, none);
@@ -337,23 +321,23 @@ impl CrowdPipeline {
             "crowd-solve",
             &[&[Binding::Uniform, Binding::Uniform, ro, ro], &[ro, ro, ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
         );
-        let build = |layout: &ExplicitLayout, src: &str, entries: &[&str]| -> Vec<Kernel> {
-            entries.iter().map(|e| Kernel { pipeline: gpu.pipeline_on(layout, e, src, e) }).collect()
+        let build = |layout: &ExplicitLayout, src: &str, entries: &[&str]| -> Vec<wgpu::ComputePipeline> {
+            entries.iter().map(|e| gpu.pipeline_on(layout, e, src, e)).collect()
         };
         let near_src = source(NEAR_WGSL);
-        let near: [Kernel; 7] = build(
+        let near: [wgpu::ComputePipeline; 7] = build(
             &near_layout,
             &near_src,
             &["keep_keys", "near_count", "near_scan", "near_emit", "incidence", "colour_round", "colour_sort"],
         )
         .try_into()
         .unwrap_or_else(|_| unreachable!());
-        let contacts: [Kernel; 2] = build(&contact_layout, &source(CONTACTS_WGSL), &["crowd_generate", "crowd_alloc"])
-            .try_into()
-            .unwrap_or_else(|_| unreachable!());
-        let merge =
-            Kernel { pipeline: gpu.pipeline_on(&merge_layout, "crowd_merge", &source(MERGE_WGSL), "crowd_merge") };
-        let solve: [Kernel; 5] = build(
+        let contacts: [wgpu::ComputePipeline; 2] =
+            build(&contact_layout, &source(CONTACTS_WGSL), &["crowd_generate", "crowd_alloc"])
+                .try_into()
+                .unwrap_or_else(|_| unreachable!());
+        let merge = gpu.pipeline_on(&merge_layout, "crowd_merge", &source(MERGE_WGSL), "crowd_merge");
+        let solve: [wgpu::ComputePipeline; 5] = build(
             &solve_layout,
             &source(SOLVE_WGSL),
             &["crowd_build_rows", "crowd_velocities", "crowd_pass", "crowd_positions", "crowd_finish"],
@@ -478,8 +462,14 @@ impl CrowdPipeline {
         self.encode_solve(enc);
     }
 
-    fn set(&self, pass: &mut wgpu::ComputePass, k: &Kernel, groups: &[wgpu::BindGroup], slot: Option<u32>) {
-        pass.set_pipeline(&k.pipeline);
+    fn set(
+        &self,
+        pass: &mut wgpu::ComputePass,
+        k: &wgpu::ComputePipeline,
+        groups: &[wgpu::BindGroup],
+        slot: Option<u32>,
+    ) {
+        pass.set_pipeline(k);
         for (i, g) in groups.iter().enumerate() {
             // Group 3 is the per-dispatch parameters (a dynamic offset into the pass slots).
             let offsets = [self.pass_offset(slot.unwrap_or(0))];
@@ -566,9 +556,7 @@ impl CrowdPipeline {
         let q: Vec<TransformGpu> = gpu.read_buffer(&self.body_q);
         let qd: Vec<[f32; 4]> = gpu.read_buffer(&self.body_qd);
         let status: Vec<[f32; 4]> = gpu.read_buffer_prefix(&self.scratch, self.world_count as u64 * 16);
-        let body_qd = (0..q.len())
-            .map(|i| [glam::Vec4::from_array(qd[2 * i]).truncate(), glam::Vec4::from_array(qd[2 * i + 1]).truncate()])
-            .collect();
+        let body_qd = crate::gpu::unpack_vec3_pairs(&qd);
         (BodyState { body_q: q, body_qd }, status.iter().map(|s| s[0] == 1.0).collect())
     }
 
@@ -590,52 +578,47 @@ impl CrowdPipeline {
     pub fn read_frames(&self, gpu: &GpuContext) -> Vec<CrowdFrame> {
         let meta = self.meta_words(gpu);
         let pairs: Vec<PairGpu> = gpu.read_buffer(&self.crowd_pairs);
-        (0..self.world_count)
-            .map(|w| {
-                let m = self.world_meta(&meta, w);
-                let count = m[M_COUNT] as usize;
-                let base = (w * self.cfg.max_pairs) as usize;
-                let colour = &m[self.pair_array(1)..];
-                CrowdFrame {
-                    pairs: (0..count)
-                        .map(|e| {
-                            let p = &pairs[base + e];
-                            NearPair { a: p.body_a, key: p.job_first, b: p.body_b, template: p.crowd_template }
-                        })
-                        .collect(),
-                    colours: (0..count)
-                        .map(|e| if colour[e] == UNCOLOURED { COLOUR_NONE } else { colour[e] & 0xff })
-                        .collect(),
-                    colour_count: m[M_COLOURS],
-                    flags: m[M_FLAGS],
-                }
-            })
-            .collect()
+        (0..self.world_count).map(|w| self.frame_of(&meta, &pairs, w)).collect()
     }
 
-    /// Each world's near pairs with their reduced patches of the last frame (waits; for tests and reports).
-    /// The crowd kernels compute no per-contact normals: each contact carries its patch's normal.
-    pub fn read_patches(&self, gpu: &GpuContext) -> Vec<Vec<(NearPair, Vec<Patch>)>> {
-        let frames = self.read_frames(gpu);
+    /// World `w`'s frame from the bookkeeping words and pair records read back.
+    fn frame_of(&self, meta: &[u32], pairs: &[PairGpu], w: u32) -> CrowdFrame {
+        let m = self.world_meta(meta, w);
+        let count = m[M_COUNT] as usize;
+        let base = (w * self.cfg.max_pairs) as usize;
+        let colour = &m[self.pair_array(P_COLOUR)..];
+        CrowdFrame {
+            pairs: pairs[base..base + count]
+                .iter()
+                .map(|p| NearPair { a: p.body_a, key: p.job_first, b: p.body_b, template: p.crowd_template })
+                .collect(),
+            colours: colour[..count].iter().map(|&c| if c == UNCOLOURED { COLOUR_NONE } else { c & 0xff }).collect(),
+            colour_count: m[M_COLOURS],
+            flags: m[M_FLAGS],
+        }
+    }
+
+    /// Each world's last frame with the reduced patches of each of its near pairs, in list order (waits;
+    /// for tests and reports; every buffer is read once). The crowd kernels compute no per-contact
+    /// normals: each contact carries its patch's normal.
+    pub fn read_patches(&self, gpu: &GpuContext) -> Vec<(CrowdFrame, Vec<Vec<Patch>>)> {
         let meta = self.meta_words(gpu);
+        let pairs: Vec<PairGpu> = gpu.read_buffer(&self.crowd_pairs);
         let raw: Vec<PatchGpu> = gpu.read_buffer(&self.patches);
         let mp = self.contact.max_patches as usize;
-        frames
-            .into_iter()
-            .enumerate()
-            .map(|(w, f)| {
-                let m = self.world_meta(&meta, w as u32);
-                let pc = &m[self.pair_array(5)..];
-                let base = w * self.cfg.max_pairs as usize;
-                f.pairs
-                    .iter()
-                    .enumerate()
-                    .map(|(e, np)| {
+        (0..self.world_count)
+            .map(|w| {
+                let frame = self.frame_of(&meta, &pairs, w);
+                let pc = &self.world_meta(&meta, w)[self.pair_array(P_PATCH_COUNT)..];
+                let base = w as usize * self.cfg.max_pairs as usize;
+                let patches = (0..frame.pairs.len())
+                    .map(|e| {
                         let first = (base + e) * mp;
                         let ps = &raw[first..first + pc[e] as usize];
-                        (*np, to_patches(ps, |i, _| Vec3::from_slice(&ps[i].normal[..3])))
+                        to_patches(ps, |i, _| Vec3::from_slice(&ps[i].normal[..3]))
                     })
-                    .collect()
+                    .collect();
+                (frame, patches)
             })
             .collect()
     }
@@ -649,8 +632,8 @@ impl CrowdPipeline {
             .map(|w| {
                 let m = self.world_meta(&meta, w);
                 let count = m[M_COUNT] as usize;
-                let pc = &m[self.pair_array(5)..self.pair_array(5) + count];
-                let cand = &m[self.pair_array(6)..self.pair_array(6) + count];
+                let pc = &m[self.pair_array(P_PATCH_COUNT)..self.pair_array(P_PATCH_COUNT) + count];
+                let cand = &m[self.pair_array(P_CANDIDATES)..self.pair_array(P_CANDIDATES) + count];
                 let base = (w * self.cfg.max_pairs) as usize;
                 let contacts = (0..count)
                     .map(|e| {

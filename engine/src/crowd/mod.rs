@@ -33,7 +33,7 @@ pub mod gpu;
 
 use crate::contact::generate::{pair_far_cpu, sdf_sample_cpu, shape_world, Xf};
 use crate::contact::model::{FlatModel, JobGpu, PairGpu, NO_BODY};
-use crate::contact::{contacts_cpu, ContactConfig, ContactModel, PairSpec, QueryShape, TransformGpu};
+use crate::contact::{contacts_cpu, ContactConfig, ContactModel, PairSpec, QueryShape};
 use crate::error::{EngineError, Result};
 use crate::solver::{step_cpu, BodyModel, BodyState, Control, SolverConfig, WarmStart};
 use glam::Vec3;
@@ -501,16 +501,7 @@ impl CrowdCpu {
         contact: &ContactConfig,
         solver: &SolverConfig,
     ) -> Result<Self> {
-        cfg.validate()?;
-        solver.validate()?;
-        bodies.validate()?;
-        if bodies.body_count() as u32 != model.body_count {
-            return Err(EngineError::Config {
-                field: "body_count",
-                value: bodies.body_count().to_string(),
-                expected: format!("the crowd model's {} bodies", model.body_count),
-            });
-        }
+        check_setup(model, bodies, cfg, solver)?;
         let flat = CrowdFlat::new(model, contact)?;
         let world_flat = FlatModel {
             pairs: Vec::new(),
@@ -563,6 +554,12 @@ impl CrowdCpu {
             order.sort_by_key(|&e| (colours[e], e));
             let solve_pairs: Vec<NearPair> = order.iter().map(|&e| pairs[e]).collect();
             let mut frame = CrowdFrame { pairs, colours, colour_count, flags };
+            if frame.flags != 0 {
+                // Not stepped (as on the GPU): no contacts, and no warm start for next frame.
+                self.warm[w] = Default::default();
+                out.push((frame, false));
+                continue;
+            }
             self.world_flat.pairs.clear();
             self.world_flat.jobs.clear();
             for (k, np) in solve_pairs.iter().enumerate() {
@@ -590,11 +587,9 @@ impl CrowdCpu {
             let range = w * n..(w + 1) * n;
             let contacts = contacts_cpu(&self.world_flat, n as u32, 1, &state.body_q[range.clone()], &self.contact);
             let patches: usize = contacts.patches.iter().map(|p| p.len()).sum();
-            if frame.flags == 0 && patches > self.cfg.max_patches_per_world as usize {
-                frame.flags |= FLAG_PATCHES;
-            }
             let (old_pairs, mut warm) = std::mem::take(&mut self.warm[w]);
-            if frame.flags != 0 {
+            if patches > self.cfg.max_patches_per_world as usize {
+                frame.flags |= FLAG_PATCHES;
                 out.push((frame, false));
                 continue;
             }
@@ -621,11 +616,27 @@ impl CrowdCpu {
     }
 }
 
-fn key(p: &NearPair) -> (u32, u32) {
-    (p.a, p.key)
+/// The checks the GPU pipeline and the CPU twin both make on their settings (the models are checked by
+/// CrowdFlat::new).
+pub(crate) fn check_setup(
+    model: &CrowdModel,
+    bodies: &BodyModel,
+    cfg: &CrowdConfig,
+    solver: &SolverConfig,
+) -> Result<()> {
+    cfg.validate()?;
+    solver.validate()?;
+    bodies.validate()?;
+    if bodies.body_count() as u32 != model.body_count {
+        return Err(EngineError::Config {
+            field: "body_count",
+            value: bodies.body_count().to_string(),
+            expected: format!("the crowd model's {} bodies", model.body_count),
+        });
+    }
+    Ok(())
 }
 
-/// Poses of body `i` of world `w` in a flat state (a convenience for callers).
-pub fn pose(state: &BodyState, body_count: u32, w: u32, i: u32) -> TransformGpu {
-    state.body_q[(w * body_count + i) as usize]
+fn key(p: &NearPair) -> (u32, u32) {
+    (p.a, p.key)
 }

@@ -182,9 +182,7 @@ pub(crate) fn write_wrenches(gpu: &GpuContext, scratch: &wgpu::Buffer, (offset, 
         return;
     }
     assert_eq!(control.body_f.len() as u64 * 32, size, "Control::body_f shape [world_count * body_count]");
-    let f: Vec<[f32; 4]> =
-        control.body_f.iter().flat_map(|w| [w[0].extend(0.0).to_array(), w[1].extend(0.0).to_array()]).collect();
-    gpu.queue.write_buffer(scratch, offset, bytemuck::cast_slice(&f));
+    gpu.queue.write_buffer(scratch, offset, bytemuck::cast_slice(&crate::gpu::pack_vec3_pairs(&control.body_f)));
 }
 
 /// Writes the poses and velocities of world `world` (shape [body_count] each) into `body_q` and `body_qd`
@@ -198,7 +196,7 @@ pub(crate) fn write_world_bodies(
     qd: &[[glam::Vec3; 2]],
 ) {
     let n = q.len() as u64;
-    let v: Vec<[f32; 4]> = qd.iter().flat_map(|v| [v[0].extend(0.0).to_array(), v[1].extend(0.0).to_array()]).collect();
+    let v = crate::gpu::pack_vec3_pairs(qd);
     if n > 0 {
         gpu.queue.write_buffer(body_q, world as u64 * n * 32, bytemuck::cast_slice(q));
         gpu.queue.write_buffer(body_qd, world as u64 * n * 32, bytemuck::cast_slice(&v));
@@ -247,14 +245,7 @@ impl GpuSolver {
         let params = solver_params(cfg, model, world_count, pair_count, max_rows, loop_budget);
         let bodies = bodies_gpu(model);
         let dev = &gpu.device;
-        let uniform = {
-            use wgpu::util::DeviceExt;
-            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("solver-params"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
-        };
+        let uniform = gpu.uniform_buffer("solver-params", bytemuck::bytes_of(&params));
         let none = wgpu::BufferUsages::empty();
         let bodies_buf = gpu.storage_buffer("bodies", &bodies, none);
         let nbw = (world_count * contacts.body_count) as u64;
@@ -299,8 +290,7 @@ impl GpuSolver {
     pub fn write_state(&self, gpu: &GpuContext, contacts: &ContactPipeline, state: &BodyState) {
         self.forget_warm_start(gpu);
         contacts.write_body_q(gpu, &state.body_q);
-        let qd: Vec<[f32; 4]> =
-            state.body_qd.iter().flat_map(|v| [v[0].extend(0.0).to_array(), v[1].extend(0.0).to_array()]).collect();
+        let qd = crate::gpu::pack_vec3_pairs(&state.body_qd);
         if !qd.is_empty() {
             gpu.queue.write_buffer(&self.body_qd, 0, bytemuck::cast_slice(&qd));
         }
@@ -383,9 +373,7 @@ impl GpuSolver {
         // Only the per-world status at the front of the scratch buffer, not the rows behind it.
         let scratch: Vec<[f32; 4]> = gpu.read_buffer_prefix(&self.scratch, self.world_count as u64 * 16);
         let n = (self.world_count * contacts.body_count) as usize;
-        let body_qd = (0..n)
-            .map(|i| [glam::Vec4::from_array(qd[2 * i]).truncate(), glam::Vec4::from_array(qd[2 * i + 1]).truncate()])
-            .collect();
+        let body_qd = crate::gpu::unpack_vec3_pairs(&qd[..2 * n]);
         let ok = scratch[..self.world_count as usize].iter().map(|s| s[0] == 1.0).collect();
         (BodyState { body_q: q[..n].to_vec(), body_qd }, ok)
     }
