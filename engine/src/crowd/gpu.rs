@@ -198,8 +198,8 @@ impl CrowdPipeline {
         let (w, cap, mp) = (world_count as u64, cfg.max_pairs as u64, contact.max_patches as u64);
         let meta_stride = M_HEAD + 4 * n + 9 * cfg.max_pairs;
         let patch_bytes = std::mem::size_of::<PatchGpu>() as u64;
-        let rows_vec4 = 2 * w * cfg.max_patches_per_world as u64 * 4 * 4;
-        let scratch_bytes = (w * (1 + 2 * n as u64) + rows_vec4) * 16;
+        let rows_vec4 = 2 * w * cfg.max_patches_per_world as u64 * 4 * crate::solver::gpu::ROW_VEC4;
+        let scratch_bytes = crate::solver::gpu::rows_offset(world_count, n) + rows_vec4 * 16;
         let hint = "use fewer worlds per pipeline, a smaller max_pairs, max_patches or max_patches_per_world";
         too_large(
             gpu,
@@ -430,14 +430,14 @@ impl CrowdPipeline {
         let n = self.body_count as usize;
         assert!(body_q.len() == n && body_qd.len() == n, "one world's bodies: shape [body_count = {n}]");
         crate::solver::gpu::write_world_bodies(gpu, &self.body_q, &self.body_qd, world, body_q, body_qd);
-        let (status, control) = self.control_range();
         let (w, wc) = (world as u64, self.world_count as u64);
-        let rows = self.cfg.max_patches_per_world as u64 * 4 * 4 * 16;
+        let rows = self.cfg.max_patches_per_world as u64 * 4 * crate::solver::gpu::ROW_VEC4 * 16;
+        let rows_offset = crate::solver::gpu::rows_offset(self.world_count, self.body_count);
         let stride = self.params.meta_stride as u64 * 4;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.scratch, w * 16, Some(16));
         for block in 0..2 {
-            enc.clear_buffer(&self.scratch, status + control + (block * wc + w) * rows, Some(rows));
+            enc.clear_buffer(&self.scratch, rows_offset + (block * wc + w) * rows, Some(rows));
         }
         enc.clear_buffer(&self.meta, w * stride, Some(stride));
         gpu.queue.submit([enc.finish()]);

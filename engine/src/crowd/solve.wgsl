@@ -122,9 +122,7 @@ fn crowd_pass(@builtin(global_invocation_id) gid: vec3<u32>) {
     let first = crowd_meta[m_row_first(w) + e];
     let par = frame_of(w) & 1u;
     let h = sp.dt / f32(sp.substeps);
-    for (var i = 0u; i < count; i++) {
-        patch_pass(w, crowd_row(par, w, first + i), h, pp.bias != 0u, pp.warm != 0u, pp.resample != 0u);
-    }
+    pair_pass(w, w * cp.cap + e, crowd_row(par, w, first), count, h, pp.bias != 0u, pp.warm != 0u, pp.resample != 0u);
 }
 
 // Per world: status (x: 1 ok, 0 diverged or not stepped; y: near pairs; z: flags) and the frame counter.

@@ -173,6 +173,15 @@ pub(crate) fn control_range(world_count: u32, body_count: u32) -> (u64, u64) {
     (world_count as u64 * 16, world_count as u64 * body_count as u64 * 32)
 }
 
+/// vec4s per contact row in a solver scratch buffer (solver_core.wgsl's ROW).
+pub(crate) const ROW_VEC4: u64 = 4;
+
+/// Byte offset of the rows in a solver scratch buffer: the status per world, then two vec4 of wrench per
+/// body (solver_core.wgsl's rows_base).
+pub(crate) fn rows_offset(world_count: u32, body_count: u32) -> u64 {
+    world_count as u64 * (1 + 2 * body_count as u64) * 16
+}
+
 /// Writes `control`'s wrenches into `scratch` at `(offset, size)` (an empty control clears them).
 pub(crate) fn write_wrenches(gpu: &GpuContext, scratch: &wgpu::Buffer, (offset, size): (u64, u64), control: &Control) {
     if control.body_f.is_empty() {
@@ -251,7 +260,7 @@ impl GpuSolver {
         let nbw = (world_count * contacts.body_count) as u64;
         let body_qd = gpu.storage_buffer_zeroed("body_qd", nbw * 2 * 16);
         let scratch_bytes =
-            (world_count as u64 * (1 + 2 * contacts.body_count as u64) + world_count as u64 * max_rows as u64 * 4) * 16;
+            rows_offset(world_count, contacts.body_count) + world_count as u64 * max_rows as u64 * ROW_VEC4 * 16;
         if scratch_bytes > gpu.limits().max_storage_buffer_binding_size {
             return Err(EngineError::TooLarge {
                 what: format!("solver rows for {world_count} worlds x {max_rows} contacts"),
@@ -321,11 +330,10 @@ impl GpuSolver {
         let n = self.body_count as usize;
         assert!(body_q.len() == n && body_qd.len() == n, "one world's bodies: shape [body_count = {n}]");
         write_world_bodies(gpu, &contacts.body_q, &self.body_qd, world, body_q, body_qd);
-        let (status, control) = self.control_range();
-        let rows = self.max_rows as u64 * 4 * 16;
+        let rows = self.max_rows as u64 * ROW_VEC4 * 16;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.scratch, world as u64 * 16, Some(16));
-        enc.clear_buffer(&self.scratch, status + control + world as u64 * rows, Some(rows));
+        enc.clear_buffer(&self.scratch, rows_offset(self.world_count, self.body_count) + world as u64 * rows, Some(rows));
         gpu.queue.submit([enc.finish()]);
     }
 

@@ -30,9 +30,7 @@ fn row_index(row0: u32, p: u32, i: u32, k: u32) -> u32 {
 fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool, resample: bool) {
     for (var p = 0u; p < sp.pair_count; p++) {
         let count = patch_counts[world * sp.pair_count + p];
-        for (var i = 0u; i < count; i++) {
-            patch_pass(world, row_index(row0, p, i, 0u), h, bias, warm, resample);
-        }
+        pair_pass(world, p, row_index(row0, p, 0u, 0u), count, h, bias, warm, resample);
     }
 }
 

@@ -46,7 +46,7 @@ struct Row {
     point_b: vec4<f32>,
 }
 
-// vec4s per row in solver_scratch.
+// vec4s per row in solver_scratch (solver/gpu.rs ROW_VEC4).
 const ROW: u32 = 4u;
 
 // solver_scratch holds, in order: a status vec4 per world (x: 1 ok, 0 diverged; y: rows used), the external
@@ -86,80 +86,129 @@ fn any_orthonormal(n: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(b, sign + n.y * n.y * a, -n.y);
 }
 
+// A body's pose, for building rows and sampling the SDF at them.
 struct BodyView {
     pos: vec3<f32>,
     rot: vec4<f32>,
     com: vec3<f32>,
     inv_mass: f32,
-    inv_i: mat3x3<f32>,
     index: u32, // global body index, NONE for the static world
 }
 
 fn view(world: u32, b: u32) -> BodyView {
     if (b == NONE) {
-        return BodyView(vec3<f32>(0.0), vec4<f32>(0.0, 0.0, 0.0, 1.0), vec3<f32>(0.0), 0.0, mat3x3<f32>(), NONE);
+        return BodyView(vec3<f32>(0.0), vec4<f32>(0.0, 0.0, 0.0, 1.0), vec3<f32>(0.0), 0.0, NONE);
     }
     let g = world * sp.body_count + b;
     let t = body_q[g];
+    let m = bodies[b].com_inv_mass;
+    return BodyView(t.p.xyz, t.q, m.xyz, m.w, g);
+}
+
+// A body's response to impulses: global index (NONE: the static world), inverse mass [1/kg] and world
+// inverse inertia [1/(kg m^2)] (zero for static and kinematic bodies).
+struct Dyn {
+    index: u32,
+    inv_mass: f32,
+    inv_i: mat3x3<f32>,
+}
+
+fn dyn_of(world: u32, b: u32) -> Dyn {
+    if (b == NONE) {
+        return Dyn(NONE, 0.0, mat3x3<f32>());
+    }
+    let g = world * sp.body_count + b;
     let m = bodies[b];
     var inv_i = mat3x3<f32>();
     if (m.com_inv_mass.w > 0.0) {
-        let r = quat_to_mat3(t.q);
+        let r = quat_to_mat3(body_q[g].q);
         inv_i = r * m.inv_inertia * transpose(r);
     }
-    return BodyView(t.p.xyz, t.q, m.com_inv_mass.xyz, m.com_inv_mass.w, inv_i, g);
+    return Dyn(g, m.com_inv_mass.w, inv_i);
 }
 
-fn vel_lin(v: BodyView) -> vec3<f32> {
-    if (v.index == NONE) {
-        return vec3<f32>(0.0);
+// A body's velocity (linear [m/s], angular [rad/s]), held in registers while a pass goes over a pair's
+// rows (pair_pass).
+struct Vel {
+    lin: vec3<f32>,
+    ang: vec3<f32>,
+}
+
+fn vel_load(d: Dyn) -> Vel {
+    if (d.index == NONE) {
+        return Vel(vec3<f32>(0.0), vec3<f32>(0.0));
     }
-    return body_qd[2u * v.index].xyz;
+    return Vel(body_qd[2u * d.index].xyz, body_qd[2u * d.index + 1u].xyz);
 }
 
-fn vel_ang(v: BodyView) -> vec3<f32> {
-    if (v.index == NONE) {
-        return vec3<f32>(0.0);
-    }
-    return body_qd[2u * v.index + 1u].xyz;
-}
-
-fn apply(v: BodyView, r: vec3<f32>, imp: vec3<f32>, sign: f32) {
-    if (v.index == NONE || v.inv_mass == 0.0) {
+// Writes back a velocity that impulses may have changed (static and kinematic bodies take none).
+fn vel_store(d: Dyn, v: Vel) {
+    if (d.index == NONE || d.inv_mass == 0.0) {
         return;
     }
-    body_qd[2u * v.index] = vec4<f32>(vel_lin(v) + sign * v.inv_mass * imp, 0.0);
-    body_qd[2u * v.index + 1u] = vec4<f32>(vel_ang(v) + sign * (v.inv_i * cross(r, imp)), 0.0);
+    body_qd[2u * d.index] = vec4<f32>(v.lin, 0.0);
+    body_qd[2u * d.index + 1u] = vec4<f32>(v.ang, 0.0);
 }
 
-fn eff_mass(va: BodyView, vb: BodyView, ra: vec3<f32>, rb: vec3<f32>, d: vec3<f32>) -> f32 {
+// Velocity of the point at lever arm r.
+fn vel_at(v: Vel, r: vec3<f32>) -> vec3<f32> {
+    return v.lin + cross(v.ang, r);
+}
+
+// v after impulse `imp` [N s] at lever arm r (sign -1: its opposite).
+fn vel_apply(d: Dyn, v: Vel, r: vec3<f32>, imp: vec3<f32>, sign: f32) -> Vel {
+    if (d.index == NONE || d.inv_mass == 0.0) {
+        return v;
+    }
+    return Vel(v.lin + sign * d.inv_mass * imp, v.ang + sign * (d.inv_i * cross(r, imp)));
+}
+
+fn eff_mass(da: Dyn, db: Dyn, ra: vec3<f32>, rb: vec3<f32>, d: vec3<f32>) -> f32 {
     let ca = cross(ra, d);
     let cb = cross(rb, d);
-    return va.inv_mass + vb.inv_mass + dot(ca, va.inv_i * ca) + dot(cb, vb.inv_i * cb);
+    return da.inv_mass + db.inv_mass + dot(ca, da.inv_i * ca) + dot(cb, db.inv_i * cb);
 }
 
-// One tangential row: returns the new accumulated impulse, clamped to the friction cone's box.
-fn friction_row(va: BodyView, vb: BodyView, ra: vec3<f32>, rb: vec3<f32>, t: vec3<f32>, old: f32, limit: f32) -> f32 {
-    let kt = eff_mass(va, vb, ra, rb, t);
+// One tangential row (effective mass kt) on the velocities va, vb: returns the new accumulated impulse,
+// clamped to the friction cone's box.
+fn friction_row(da: Dyn, db: Dyn, va: ptr<function, Vel>, vb: ptr<function, Vel>, ra: vec3<f32>, rb: vec3<f32>, t: vec3<f32>, kt: f32, old: f32, limit: f32) -> f32 {
     if (kt <= 0.0) {
         return old;
     }
-    let vt = dot((vel_lin(va) + cross(vel_ang(va), ra)) - (vel_lin(vb) + cross(vel_ang(vb), rb)), t);
+    let vt = dot(vel_at(*va, ra) - vel_at(*vb, rb), t);
     let new_t = clamp(old - vt / kt, -limit, limit);
-    apply(va, ra, t * (new_t - old), 1.0);
-    apply(vb, rb, t * (new_t - old), -1.0);
+    *va = vel_apply(da, *va, ra, t * (new_t - old), 1.0);
+    *vb = vel_apply(db, *vb, rb, t * (new_t - old), -1.0);
     return new_t;
 }
 
-fn solve_row(world: u32, g0: u32, ri: u32, h: f32, bias: bool, resample: bool) {
+// What a pass over one pair's rows reads once: the pair, its bodies' poses, responses and velocities (the
+// velocities are carried from row to row in registers and written back at the end of the pass). The
+// poses stand still during a sweep, so this is bitwise what reading them at every row would give: on a
+// software adapter every storage access is a bounds-checked gather, and the solver spent most of its time
+// re-reading these: M16 nut-bolt (48 segments per turn), 256 worlds, 2026-12-02: 73 ms of solve per frame
+// against 258-271 ms when every row re-read them and every impulse re-read and wrote the velocities;
+// against 190-212 ms when only the velocities stayed in registers per row; caching each row's lever arms
+// and effective masses and each body's world inertia in the scratch buffer made it slower (365-436 ms):
+// loads, not arithmetic, are what cost.
+struct PairCtx {
+    pair: Pair,
+    va: BodyView,
+    vb: BodyView,
+    da: Dyn,
+    db: Dyn,
+}
+
+// One Gauss-Seidel update of row ri (of the patch at g0) of pair c on the velocities vla, vlb.
+fn solve_row(c: PairCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, g0: u32, ri: u32, h: f32, bias: bool, resample: bool) {
     let anchor = solver_scratch[ri];
     if (bitcast<u32>(anchor.w) == NONE) {
         return; // an empty slot of its patch
     }
     var lambda = solver_scratch[ri + 1u];
-    let pair = pairs[bitcast<u32>(anchor.w)];
-    let va = view(world, pair.body_a);
-    let vb = view(world, pair.body_b);
+    let pair = c.pair;
+    let va = c.va;
+    let vb = c.vb;
     let x = va.pos + quat_rotate(va.rot, anchor.xyz);
     var n: vec3<f32>;
     var s: f32;
@@ -185,7 +234,7 @@ fn solve_row(world: u32, g0: u32, ri: u32, h: f32, bias: bool, resample: bool) {
     let xa = x - pair.radius * n;
     let ra = xa - (va.pos + quat_rotate(va.rot, va.com));
     let rb = xa - (vb.pos + quat_rotate(vb.rot, vb.com));
-    let k = eff_mass(va, vb, ra, rb, n);
+    let k = eff_mass(c.da, c.db, ra, rb, n);
     if (k <= 0.0) {
         return;
     }
@@ -195,12 +244,12 @@ fn solve_row(world: u32, g0: u32, ri: u32, h: f32, bias: bool, resample: bool) {
     } else if (bias) {
         goal = min(-s / h, sp.max_depenetration_velocity);
     }
-    let vn = dot((vel_lin(va) + cross(vel_ang(va), ra)) - (vel_lin(vb) + cross(vel_ang(vb), rb)), n);
+    let vn = dot(vel_at(*vla, ra) - vel_at(*vlb, rb), n);
     let new_n = max(lambda.x + (goal - vn) / k, 0.0);
     let dn = new_n - lambda.x;
     lambda.x = new_n;
-    apply(va, ra, n * dn, 1.0);
-    apply(vb, rb, n * dn, -1.0);
+    *vla = vel_apply(c.da, *vla, ra, n * dn, 1.0);
+    *vlb = vel_apply(c.db, *vlb, rb, n * dn, -1.0);
     let mu = lambda.w;
     if (mu > 0.0) {
         let t1 = any_orthonormal(n);
@@ -210,8 +259,8 @@ fn solve_row(world: u32, g0: u32, ri: u32, h: f32, bias: bool, resample: bool) {
             limit = mu * patch_normal_share(g0, ri, lambda.x);
         }
         // Written out (not a loop): lavapipe counts every loop pass against one budget per invocation.
-        lambda.y = friction_row(va, vb, ra, rb, t1, lambda.y, limit);
-        lambda.z = friction_row(va, vb, ra, rb, t2, lambda.z, limit);
+        lambda.y = friction_row(c.da, c.db, vla, vlb, ra, rb, t1, eff_mass(c.da, c.db, ra, rb, t1), lambda.y, limit);
+        lambda.z = friction_row(c.da, c.db, vla, vlb, ra, rb, t2, eff_mass(c.da, c.db, ra, rb, t2), lambda.z, limit);
     }
     solver_scratch[ri + 1u] = lambda;
 }
@@ -235,25 +284,24 @@ fn patch_normal_share(g0: u32, ri: u32, own: f32) -> f32 {
 
 // Warm start of one row at the start of a substep: re-applies the impulses of the previous substep (or of
 // the matching row last frame) along the normal they were solved with (the anchor moved with body a since).
-fn warm_row(world: u32, ri: u32) {
+fn warm_row(c: PairCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, ri: u32) {
     let anchor = solver_scratch[ri];
     let nw = solver_scratch[ri + 2u];
     let lambda = solver_scratch[ri + 1u];
     if (bitcast<u32>(anchor.w) == NONE || all(nw.xyz == vec3<f32>(0.0)) || all(lambda.xyz == vec3<f32>(0.0))) {
         return;
     }
-    let pair = pairs[bitcast<u32>(anchor.w)];
-    let va = view(world, pair.body_a);
-    let vb = view(world, pair.body_b);
+    let va = c.va;
+    let vb = c.vb;
     let n = nw.xyz;
-    let xa = va.pos + quat_rotate(va.rot, anchor.xyz) - pair.radius * n;
+    let xa = va.pos + quat_rotate(va.rot, anchor.xyz) - c.pair.radius * n;
     let ra = xa - (va.pos + quat_rotate(va.rot, va.com));
     let rb = xa - (vb.pos + quat_rotate(vb.rot, vb.com));
     let t1 = any_orthonormal(n);
     let t2 = cross(n, t1);
     let imp = lambda.x * n + lambda.y * t1 + lambda.z * t2;
-    apply(va, ra, imp, 1.0);
-    apply(vb, rb, imp, -1.0);
+    *vla = vel_apply(c.da, *vla, ra, imp, 1.0);
+    *vlb = vel_apply(c.db, *vlb, rb, imp, -1.0);
 }
 
 // Builds the 4 rows of a patch at g0 (tagged with pair index p) from the reduced contacts. Warm start across frames: a row takes
@@ -324,26 +372,39 @@ fn build_row(rk: u32, c: vec4<f32>, old: array<Row, 4>, p: u32, old_p: u32, pair
 }
 
 
-// One pass over one patch's 4 rows at g0: the warm start (warm) or a Gauss-Seidel update of each row,
-// then SolverConfig::patch_iters - 1 more passes over this patch alone on the sampled geometry.
-fn patch_pass(world: u32, g0: u32, h: f32, bias: bool, warm: bool, resample: bool) {
-    if (warm) {
-        warm_row(world, g0);
-        warm_row(world, g0 + ROW);
-        warm_row(world, g0 + 2u * ROW);
-        warm_row(world, g0 + 3u * ROW);
-    } else {
-        solve_row(world, g0, g0, h, bias, resample);
-        solve_row(world, g0, g0 + ROW, h, bias, resample);
-        solve_row(world, g0, g0 + 2u * ROW, h, bias, resample);
-        solve_row(world, g0, g0 + 3u * ROW, h, bias, resample);
-        for (var inner = 1u; inner < sp.patch_iters; inner++) {
-            solve_row(world, g0, g0, h, bias, false);
-            solve_row(world, g0, g0 + ROW, h, bias, false);
-            solve_row(world, g0, g0 + 2u * ROW, h, bias, false);
-            solve_row(world, g0, g0 + 3u * ROW, h, bias, false);
+// One pass over the `count` patches of pair `p` (index into pairs), whose rows start at `first`, 4 per
+// patch: for each patch the warm start (warm) or a Gauss-Seidel update of each of its rows, then
+// SolverConfig::patch_iters - 1 more passes over this patch alone on the sampled geometry.
+fn pair_pass(world: u32, p: u32, first: u32, count: u32, h: f32, bias: bool, warm: bool, resample: bool) {
+    if (count == 0u) {
+        return;
+    }
+    let pair = pairs[p];
+    let c = PairCtx(pair, view(world, pair.body_a), view(world, pair.body_b), dyn_of(world, pair.body_a), dyn_of(world, pair.body_b));
+    var vla = vel_load(c.da);
+    var vlb = vel_load(c.db);
+    for (var i = 0u; i < count; i++) {
+        let g0 = first + i * 4u * ROW;
+        if (warm) {
+            warm_row(c, &vla, &vlb, g0);
+            warm_row(c, &vla, &vlb, g0 + ROW);
+            warm_row(c, &vla, &vlb, g0 + 2u * ROW);
+            warm_row(c, &vla, &vlb, g0 + 3u * ROW);
+        } else {
+            solve_row(c, &vla, &vlb, g0, g0, h, bias, resample);
+            solve_row(c, &vla, &vlb, g0, g0 + ROW, h, bias, resample);
+            solve_row(c, &vla, &vlb, g0, g0 + 2u * ROW, h, bias, resample);
+            solve_row(c, &vla, &vlb, g0, g0 + 3u * ROW, h, bias, resample);
+            for (var inner = 1u; inner < sp.patch_iters; inner++) {
+                solve_row(c, &vla, &vlb, g0, g0, h, bias, false);
+                solve_row(c, &vla, &vlb, g0, g0 + ROW, h, bias, false);
+                solve_row(c, &vla, &vlb, g0, g0 + 2u * ROW, h, bias, false);
+                solve_row(c, &vla, &vlb, g0, g0 + 3u * ROW, h, bias, false);
+            }
         }
     }
+    vel_store(c.da, vla);
+    vel_store(c.db, vlb);
 }
 
 // Velocity update of body b (global index first + b) over a substep h: gravity and the external wrench.
