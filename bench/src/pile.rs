@@ -261,6 +261,8 @@ pub struct PileReport {
     /// ... the median over the last second's frames of the fastest body's speed (a pile at rest may show a
     /// single frame's jitter; this is its typical speed) [m/s] ...
     pub last_second_median_max_speed_m_s: f64,
+    /// ... and that median for each simulated second in turn (the last entry covers what is left) [m/s] ...
+    pub median_max_speed_per_second_m_s: Vec<f64>,
     /// ... and the farthest any body's centre of mass moved over the last second (or the whole run if
     /// shorter) [mm]: a pile at rest jitters in place, it does not creep.
     pub last_second_max_drift_mm: f64,
@@ -327,8 +329,8 @@ struct Tally {
     second_before_end: u32,
     /// Frames done.
     frame: u32,
-    /// The fastest body's speed at each frame end of the last second [m/s].
-    last_second_speeds: Vec<f64>,
+    /// The fastest body's speed at each frame end [m/s].
+    speeds: Vec<f64>,
 }
 
 impl Tally {
@@ -355,7 +357,7 @@ impl Tally {
             frames,
             second_before_end: frames.saturating_sub((1.0 / run.solver.dt).round() as u32),
             frame: 0,
-            last_second_speeds: Vec::new(),
+            speeds: Vec::new(),
         }
     }
 
@@ -380,9 +382,7 @@ impl Tally {
             && s.body_qd.iter().all(|v| finite(v[0]) && finite(v[1]));
         let fastest = s.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64;
         self.max_speed = self.max_speed.max(fastest);
-        if self.frame >= self.second_before_end {
-            self.last_second_speeds.push(fastest);
-        }
+        self.speeds.push(fastest);
         self.frame += 1;
         self.max_energy = self.max_energy.max(total_energy(scene, &s));
         self.last = s;
@@ -452,10 +452,10 @@ fn report(
             .fold(0.0f32, f32::max) as f64
             * 1e3,
         final_max_speed_m_s: t.last.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64,
-        last_second_median_max_speed_m_s: {
-            let mut v = t.last_second_speeds.clone();
-            v.sort_by(f64::total_cmp);
-            v.get(v.len() / 2).copied().unwrap_or(0.0)
+        last_second_median_max_speed_m_s: median(&t.speeds[(t.second_before_end as usize).min(t.speeds.len())..]),
+        median_max_speed_per_second_m_s: {
+            let per_second = (1.0 / run.solver.dt).round().max(1.0) as usize;
+            t.speeds.chunks(per_second).map(median).collect()
         },
         max_penetration_mm: (-t.deepest as f64 * 1e3).max(0.0),
         finite: t.finite,
@@ -464,6 +464,13 @@ fn report(
         flags_seen: t.flags_seen,
         adapter: gpu.info.name.clone(),
     }
+}
+
+/// The median of `v` (the upper one of an even count; 0 when empty).
+fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
 }
 
 fn start_state(scene: &PileScene, run: &PileRun) -> BodyState {
@@ -497,20 +504,22 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
             .flatten()
             .flat_map(|ps| ps.iter().flat_map(|p| p.contacts.iter().map(|c| c.depth)))
             .reduce(f32::min);
-        if run.bodies >= 256 && (f + 1) % 30 == 0 {
-            // Long runs say how far they are (stderr: the report on stdout stays one JSON object).
-            eprintln!(
-                "frame {}/{}: {} near pairs, {:.0} ms per frame so far",
-                f + 1,
-                t.frames,
-                frames[0].pairs.len(),
-                t.wall * 1e3 / (f + 1) as f64
-            );
-        }
         colours = colours.max(frames.iter().map(|f| f.colour_count).max().unwrap_or(0));
+        let near0 = frames[0].pairs.len();
         let flags = frames.iter().fold(0, |a, f| a | f.flags);
         let (s, _) = pipe.read_state(gpu);
         t.after(scene, s, flags != 0, flags, deepest);
+        if run.bodies >= 256 && (f + 1) % 30 == 0 {
+            // Long runs say how far they are (stderr: the report on stdout stays one JSON object).
+            eprintln!(
+                "frame {}/{}: {} near pairs, {:.0} ms per frame so far, fastest body {:.4} m/s",
+                f + 1,
+                t.frames,
+                near0,
+                t.wall * 1e3 / (f + 1) as f64,
+                t.speeds.last().copied().unwrap_or(0.0)
+            );
+        }
     }
     let stats = pipe.read_stats(gpu);
     let (frame0, patches0) = &pipe.read_patches(gpu)[0];
