@@ -327,8 +327,6 @@ struct Tally {
     last: BodyState,
     frames: u32,
     second_before_end: u32,
-    /// Frames done.
-    frame: u32,
     /// The fastest body's speed at each frame end [m/s].
     speeds: Vec<f64>,
 }
@@ -356,7 +354,6 @@ impl Tally {
             last: state.clone(),
             frames,
             second_before_end: frames.saturating_sub((1.0 / run.solver.dt).round() as u32),
-            frame: 0,
             speeds: Vec::new(),
         }
     }
@@ -383,7 +380,6 @@ impl Tally {
         let fastest = s.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64;
         self.max_speed = self.max_speed.max(fastest);
         self.speeds.push(fastest);
-        self.frame += 1;
         self.max_energy = self.max_energy.max(total_energy(scene, &s));
         self.last = s;
     }
@@ -451,7 +447,7 @@ fn report(
             .map(|(a, b)| a.distance(*b))
             .fold(0.0f32, f32::max) as f64
             * 1e3,
-        final_max_speed_m_s: t.last.body_qd.iter().map(|v| v[0].length()).fold(0.0f32, f32::max) as f64,
+        final_max_speed_m_s: t.speeds.last().copied().unwrap_or(0.0),
         last_second_median_max_speed_m_s: median(&t.speeds[(t.second_before_end as usize).min(t.speeds.len())..]),
         median_max_speed_per_second_m_s: {
             let per_second = (1.0 / run.solver.dt).round().max(1.0) as usize;

@@ -333,7 +333,11 @@ impl GpuSolver {
         let rows = self.max_rows as u64 * ROW_VEC4 * 16;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.scratch, world as u64 * 16, Some(16));
-        enc.clear_buffer(&self.scratch, rows_offset(self.world_count, self.body_count) + world as u64 * rows, Some(rows));
+        enc.clear_buffer(
+            &self.scratch,
+            rows_offset(self.world_count, self.body_count) + world as u64 * rows,
+            Some(rows),
+        );
         gpu.queue.submit([enc.finish()]);
     }
 

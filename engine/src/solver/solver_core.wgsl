@@ -91,18 +91,20 @@ struct BodyView {
     pos: vec3<f32>,
     rot: vec4<f32>,
     com: vec3<f32>,
-    inv_mass: f32,
-    index: u32, // global body index, NONE for the static world
 }
 
 fn view(world: u32, b: u32) -> BodyView {
     if (b == NONE) {
-        return BodyView(vec3<f32>(0.0), vec4<f32>(0.0, 0.0, 0.0, 1.0), vec3<f32>(0.0), 0.0, NONE);
+        return BodyView(vec3<f32>(0.0), vec4<f32>(0.0, 0.0, 0.0, 1.0), vec3<f32>(0.0));
     }
-    let g = world * sp.body_count + b;
-    let t = body_q[g];
-    let m = bodies[b].com_inv_mass;
-    return BodyView(t.p.xyz, t.q, m.xyz, m.w, g);
+    let t = body_q[world * sp.body_count + b];
+    return BodyView(t.p.xyz, t.q, bodies[b].com_inv_mass.xyz);
+}
+
+// World-frame inverse inertia [1/(kg m^2)] of global body g (index b in its world) at its current pose.
+fn world_inv_inertia(g: u32, b: u32) -> mat3x3<f32> {
+    let r = quat_to_mat3(body_q[g].q);
+    return r * bodies[b].inv_inertia * transpose(r);
 }
 
 // A body's response to impulses: global index (NONE: the static world), inverse mass [1/kg] and world
@@ -118,13 +120,12 @@ fn dyn_of(world: u32, b: u32) -> Dyn {
         return Dyn(NONE, 0.0, mat3x3<f32>());
     }
     let g = world * sp.body_count + b;
-    let m = bodies[b];
+    let inv_mass = bodies[b].com_inv_mass.w;
     var inv_i = mat3x3<f32>();
-    if (m.com_inv_mass.w > 0.0) {
-        let r = quat_to_mat3(body_q[g].q);
-        inv_i = r * m.inv_inertia * transpose(r);
+    if (inv_mass > 0.0) {
+        inv_i = world_inv_inertia(g, b);
     }
-    return Dyn(g, m.com_inv_mass.w, inv_i);
+    return Dyn(g, inv_mass, inv_i);
 }
 
 // A body's velocity (linear [m/s], angular [rad/s]), held in registers while a pass goes over a pair's
@@ -418,9 +419,7 @@ fn integrate_velocity(first: u32, b: u32, h: f32) {
         body_qd[2u * g] = vec4<f32>(body_qd[2u * g].xyz + (sp.gravity.xyz + m.com_inv_mass.w * f) * h, 0.0);
         // The world inverse inertia only where a torque acts (most bodies have none).
         if (any(tau != vec3<f32>(0.0))) {
-            let r = quat_to_mat3(body_q[g].q);
-            let inv_i = r * m.inv_inertia * transpose(r);
-            body_qd[2u * g + 1u] = vec4<f32>(body_qd[2u * g + 1u].xyz + (inv_i * tau) * h, 0.0);
+            body_qd[2u * g + 1u] = vec4<f32>(body_qd[2u * g + 1u].xyz + (world_inv_inertia(g, b) * tau) * h, 0.0);
         }
     }
 }
