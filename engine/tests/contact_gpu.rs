@@ -268,6 +268,53 @@ fn longest_jobs_and_most_jobs_per_pair_lose_no_candidates_to_the_loop_limit() {
     }
 }
 
+/// The reduction with subgroup operations (the default where the device has them: lavapipe does) and the
+/// portable one give bitwise the same patches, on a soup that opens patches in every batch and evicts in
+/// most rounds at a budget of 16, in several jobs per pair (so the merge kernel reduces too).
+#[test]
+fn subgroup_and_portable_reductions_give_bitwise_the_same_patches() {
+    let g = gpu();
+    if !factory_engine::contact::generate::reduce_with_subgroups(g, &ContactConfig::default()) {
+        eprintln!("skipped: the adapter has no subgroups of 8 or more lanes, so only the portable reduction runs");
+        return;
+    }
+    let r = 0.05;
+    let grid = Arc::new(sphere_grid(r, 48));
+    let pair = PairSpec {
+        body_a: 0,
+        a_pose: (Vec3::ZERO, Quat::IDENTITY),
+        query: Arc::new(QueryShape { triangles: shell_soup(3000, r, 0x2545F4914F6CDD1D), radius: 0.0 }),
+        body_b: 1,
+        b_pose: (Vec3::ZERO, Quat::IDENTITY),
+        sdf: SdfShape::Grid(grid),
+        contact_offset: 0.003,
+        friction: 0.0,
+    };
+    let model = ContactModel { body_count: 2, pairs: vec![pair] };
+    let worlds = 3;
+    let mut poses = Vec::new();
+    for w in 0..worlds {
+        poses.push(TransformGpu::new(Vec3::new(0.0, 0.0, 0.001 * w as f32), Quat::from_rotation_z(0.3 * w as f32)));
+        poses.push(TransformGpu::new(Vec3::ZERO, Quat::IDENTITY));
+    }
+    for max_patches in [16, 64] {
+        let out = |subgroups: bool| {
+            let cfg = ContactConfig { max_patches, chunk_triangles: 1024, subgroups, ..Default::default() };
+            let pipe = ContactPipeline::new(g, &model, worlds, &cfg).unwrap();
+            assert_eq!(pipe.flat.jobs.len(), 3, "{cfg:?}");
+            pipe.write_body_q(g, &poses);
+            pipe.run(g);
+            pipe.read(g)
+        };
+        let (sg, plain) = (out(true), out(false));
+        assert_eq!(sg.candidates, plain.candidates, "max_patches {max_patches}");
+        for w in 0..worlds as usize {
+            assert!(sg.patches[w].len() >= max_patches as usize / 2, "world {w}: {} patches", sg.patches[w].len());
+            assert_eq!(sg.patches[w], plain.patches[w], "max_patches {max_patches}, world {w}");
+        }
+    }
+}
+
 /// GPU and CPU patches of one pair agree as sets (an eviction near-tie may reorder them): same count, and
 /// at most one in ten without an equal twin (normal within 1e-4, contacts within 1e-5 m and 1e-6 m depth).
 fn assert_patch_sets_match(gp: &[factory_engine::contact::Patch], cp: &[factory_engine::contact::Patch], what: &str) {

@@ -5,6 +5,9 @@
 // (deepest, farthest from it, farthest from their line, farthest on the other side: the largest area).
 // Candidates are never written to global memory.
 
+// The host appends reduce_plain.wgsl or, where the device has subgroup operations, reduce_subgroup.wgsl:
+// lanes_init, best_patch and the combine_* helpers (same results either way).
+//
 // Workgroup size = candidates per batch, substituted by the host (ContactConfig::workgroup_size: 32, 64,
 // 128 or 256; the CPU twin cuts its batches to the same size).
 //
@@ -127,11 +130,14 @@ fn ordered(f: f32) -> u32 {
 // AddPatch, before the barriers of the batch's last round.
 var<workgroup> cand_pd: array<vec4<f32>, 2u * WG>;      // point xyz, depth w (EMPTY: no candidate)
 var<workgroup> cand_n: array<vec4<f32>, WG>;            // unit normal xyz, area units w
-var<workgroup> patch_n: array<vec4<f32>, PATCH_CAP>;        // seed normal xyz
-var<workgroup> patch_area: array<atomic<u32>, PATCH_CAP>;   // member area [area units]
-var<workgroup> patch_slot: array<vec4<f32>, PATCH_CAP * 4u>;          // 4 per patch: point xyz, depth w
+// Patch p: seed normal xyz at patch_data[pd_normal(p)], slot k (point xyz, depth w) at pd_slot(p, k); member
+// area [area units] at patch_ak[2p], slot 0's key (members post during Assign/AddPatch) at patch_ak[2p + 1].
+// Interleaved so that one instruction moves or resets a whole patch: lavapipe runs every workgroup-memory
+// instruction lane by lane (8 scalar accesses per component) whichever lanes take it, so lane-parallel
+// copies cost a fifth of lane 0 copying field by field.
+var<workgroup> patch_data: array<vec4<f32>, PATCH_CAP * 5u>;
+var<workgroup> patch_ak: array<atomic<u32>, PATCH_CAP * 2u>;
 var<workgroup> patch_key: array<atomic<u32>, PATCH_CAP>;   // slot rounds 1-3
-var<workgroup> patch_key0: array<atomic<u32>, PATCH_CAP>;  // slot 0 (deepest): members post during Assign/AddPatch
 var<workgroup> wg_best: array<atomic<u32>, 2>;  // FindDeepest keys, double-buffered by loop parity
 var<workgroup> wg_victim: atomic<u32>; // eviction arg-min key, NONE between evictions
 // Per invocation (workgroup-uniform): batches reduced so far (the candidate buffer's parity) and FindDeepest
@@ -140,6 +146,14 @@ var<workgroup> wg_victim: atomic<u32>; // eviction arg-min key, NONE between evi
 var<private> red_batch: u32;
 var<private> red_round: u32;
 
+fn pd_normal(p: u32) -> u32 {
+    return p * 5u;
+}
+
+fn pd_slot(p: u32, k: u32) -> u32 {
+    return p * 5u + 1u + k;
+}
+
 // Stores this invocation's candidate of the next batch (EMPTY depth: none).
 fn put_candidate(lid: u32, pd: vec4<f32>, n: vec4<f32>) {
     cand_pd[(red_batch & 1u) * WG + lid] = pd;
@@ -147,11 +161,12 @@ fn put_candidate(lid: u32, pd: vec4<f32>, n: vec4<f32>) {
 }
 
 fn reset_patches(lid: u32) {
+    lanes_init();
     for (var p = lid; p < PATCH_CAP; p += WG) {
-        atomicStore(&patch_area[p], 0u);
-        atomicStore(&patch_key0[p], 0u);
+        atomicStore(&patch_ak[2u * p], 0u);
+        atomicStore(&patch_ak[2u * p + 1u], 0u);
         for (var s = 0u; s < 4u; s++) {
-            patch_slot[p * 4u + s] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
+            patch_data[pd_slot(p, s)] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
         }
     }
     if (lid == 0u) {
@@ -172,7 +187,7 @@ fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32, band: f32
     if (k == 0u) {
         return -depth;
     }
-    let s0 = patch_slot[p * 4u];
+    let s0 = patch_data[pd_slot(p, 0u)];
     if (s0.w <= MIN_DEPTH_BAND && depth > max(s0.w, 0.0) + min(band, max(abs(s0.w), MIN_DEPTH_BAND))) {
         return NEG_INF;
     }
@@ -180,7 +195,7 @@ fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32, band: f32
         let d = distance(x, s0.xyz);
         return select(NEG_INF, d, d > min_sep);
     }
-    let s1 = patch_slot[p * 4u + 1u];
+    let s1 = patch_data[pd_slot(p, 1u)];
     if (s1.w >= VALID_BELOW) {
         return NEG_INF;
     }
@@ -189,7 +204,7 @@ fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32, band: f32
         let l = length(cross(x - s0.xyz, dir));
         return select(NEG_INF, l, l > min_sep);
     }
-    let s2 = patch_slot[p * 4u + 2u];
+    let s2 = patch_data[pd_slot(p, 2u)];
     if (s2.w >= VALID_BELOW) {
         return NEG_INF;
     }
@@ -200,18 +215,7 @@ fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32, band: f32
 }
 
 fn measure(p: u32, offset: f32) -> f32 {
-    return f32(atomicLoad(&patch_area[p])) * (offset - patch_slot[p * 4u].w);
-}
-
-// One step of Assign (unrolled by 4 in reduce_batch: see the note on loops at the top).
-fn assign_step(p: u32, pc0: u32, n: vec3<f32>, best: ptr<function, f32>, mine: ptr<function, u32>) {
-    if (p < pc0) {
-        let d = dot(n, patch_n[p].xyz);
-        if (d >= *best) {
-            *best = d;
-            *mine = p;
-        }
-    }
+    return f32(atomicLoad(&patch_ak[2u * p])) * (offset - patch_data[pd_slot(p, 0u)].w);
 }
 
 // Key that a valid candidate already binned by Assign posts to wg_best in the first round: below every
@@ -233,7 +237,7 @@ const ASSIGNED_ONLY: u32 = 0x200u;
 //   AddPatch writes the patch; a fresh patch index's area and slot-0 key are still 0 from reset_patches
 //   (the temporary patch MAX_PATCHES is zeroed after each use), so members can add to them at once;
 // - slot 0 (the deepest member) is an arg-max whose keys members post as soon as they know their patch
-//   (Assign, AddPatch), into patch_key0, so it needs no round of its own; the slot's current contact
+//   (Assign, AddPatch), into patch_ak, so it needs no round of its own; the slot's current contact
 //   enters the arg-max when the key is read (max is order-free);
 // - wg_best is double-buffered: the buffer of round i+1 is zeroed during round i, before the barrier that
 //   ends every read of it from round i-1, so a round costs one workgroupUniformLoad (2 barriers), plus 3
@@ -248,19 +252,13 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
     let my_n = cand_n[lid];
     let units = u32(my_n.w);
     let my_key0 = ordered(-my.w) | (lid + 1u);
+    let found = best_patch(my_n.xyz, pc0, normal_cos); // every invocation: best_patch may use subgroups
     var mine = NONE;
     if (my.w < VALID_BELOW) {
-        var best = normal_cos;
-        mine = UNASSIGNED;
-        for (var p = 0u; p < pc0; p += 4u) {
-            assign_step(p, pc0, my_n.xyz, &best, &mine);
-            assign_step(p + 1u, pc0, my_n.xyz, &best, &mine);
-            assign_step(p + 2u, pc0, my_n.xyz, &best, &mine);
-            assign_step(p + 3u, pc0, my_n.xyz, &best, &mine);
-        }
+        mine = found;
         if (mine != UNASSIGNED) {
-            atomicAdd(&patch_area[mine], units);
-            atomicMax(&patch_key0[mine], my_key0);
+            atomicAdd(&patch_ak[2u * mine], units);
+            atomicMax(&patch_ak[2u * mine + 1u], my_key0);
         }
     }
     // New patches: FindDeepest, BinReduce, AddPatch until every candidate is binned. `mine` is this
@@ -270,10 +268,9 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
     for (var round = 0u; ; round++) {
         let b = red_round & 1u;
         red_round += 1u;
-        if (mine == UNASSIGNED) {
-            atomicMax(&wg_best[b], my_key0);
-        } else if (round == 0u && mine != NONE) {
-            atomicMax(&wg_best[b], ASSIGNED_ONLY);
+        let post = combine_max(select(select(0u, ASSIGNED_ONLY, round == 0u && mine != NONE), my_key0, mine == UNASSIGNED));
+        if (post != 0u) {
+            atomicMax(&wg_best[b], post);
         }
         if (lid == 0u) {
             atomicStore(&wg_best[b ^ 1u], 0u);
@@ -288,17 +285,20 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
         let seed = (best & IDX_MASK) - 1u;
         let seed_n = cand_n[seed].xyz;
         let idx = min(pc, MAX_PATCHES);
-        if (lid == 0u) {
-            patch_n[idx] = vec4<f32>(seed_n, 0.0);
-            patch_slot[idx * 4u] = cand_pd[cb + seed];
-            patch_slot[idx * 4u + 1u] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
-            patch_slot[idx * 4u + 2u] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
-            patch_slot[idx * 4u + 3u] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
+        if (lid < 5u) {
+            // Lane 0 the normal, lane 1 slot 0 (the seed), lanes 2-4 empty slots 1-3.
+            var v = select(vec4<f32>(0.0, 0.0, 0.0, EMPTY), cand_pd[cb + seed], lid == 1u);
+            patch_data[idx * 5u + lid] = select(v, vec4<f32>(seed_n, 0.0), lid == 0u);
         }
-        if (mine == UNASSIGNED && dot(my_n.xyz, seed_n) >= normal_cos) {
+        let joins = mine == UNASSIGNED && dot(my_n.xyz, seed_n) >= normal_cos;
+        if (joins) {
             mine = idx;
-            atomicAdd(&patch_area[idx], units);
-            atomicMax(&patch_key0[idx], my_key0);
+        }
+        let add = combine_add(select(0u, units, joins));
+        let key = combine_max(select(0u, my_key0, joins));
+        if (add != 0u) {
+            atomicAdd(&patch_ak[2u * idx], add);
+            atomicMax(&patch_ak[2u * idx + 1u], key);
         }
         if (idx < MAX_PATCHES) {
             pc = idx + 1u;
@@ -308,25 +308,30 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
             // patch (the lowest index wins a tie) and 0 for the new one (it loses ties: it replaces a patch
             // only when it measures more).
             workgroupBarrier(); // members' areas added
+            var vkey = NONE;
             for (var p = lid; p <= MAX_PATCHES; p += WG) {
-                atomicMin(&wg_victim, ordered(measure(p, offset)) | select(p + 1u, 0u, p == MAX_PATCHES));
+                vkey = min(vkey, ordered(measure(p, offset)) | select(p + 1u, 0u, p == MAX_PATCHES));
+            }
+            let post_v = combine_min(vkey);
+            if (post_v != NONE) {
+                atomicMin(&wg_victim, post_v);
             }
             let code = workgroupUniformLoad(&wg_victim) & IDX_MASK;
             let victim = select(NONE, code - 1u, code != 0u);
-            // Lane 0 moves the patch; the next reads of the patch list follow the next round's barrier.
-            // The victim's own members' slot-0 keys go with it (they are no longer members).
-            if (lid == 0u) {
+            // Lanes 0-4 move the patch's record, lanes 5-6 its area and slot-0 key, and zero the temporary
+            // patch's; the next reads of the patch list follow the next round's barrier. The victim's own
+            // members' slot-0 keys go with it (they are no longer members).
+            if (victim != NONE && lid < 5u) {
+                patch_data[victim * 5u + lid] = patch_data[MAX_PATCHES * 5u + lid];
+            }
+            if (lid == 5u || lid == 6u) {
+                let a = lid - 5u;
+                let v = atomicExchange(&patch_ak[2u * MAX_PATCHES + a], 0u);
                 if (victim != NONE) {
-                    patch_n[victim] = patch_n[MAX_PATCHES];
-                    atomicStore(&patch_area[victim], atomicLoad(&patch_area[MAX_PATCHES]));
-                    atomicStore(&patch_key0[victim], atomicLoad(&patch_key0[MAX_PATCHES]));
-                    patch_slot[victim * 4u] = patch_slot[MAX_PATCHES * 4u];
-                    patch_slot[victim * 4u + 1u] = patch_slot[MAX_PATCHES * 4u + 1u];
-                    patch_slot[victim * 4u + 2u] = patch_slot[MAX_PATCHES * 4u + 2u];
-                    patch_slot[victim * 4u + 3u] = patch_slot[MAX_PATCHES * 4u + 3u];
+                    atomicStore(&patch_ak[2u * victim + a], v);
                 }
-                atomicStore(&patch_area[MAX_PATCHES], 0u);
-                atomicStore(&patch_key0[MAX_PATCHES], 0u);
+            }
+            if (lid == 7u) {
                 atomicStore(&wg_victim, NONE);
             }
             if (mine == MAX_PATCHES) {
@@ -344,44 +349,51 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
     // visible: the last workgroupUniformLoad of the loop was a barrier.
     let band = DEPTH_BAND * offset;
     for (var p = lid; p < pc; p += WG) {
-        let key = max(atomicLoad(&patch_key0[p]), slot_key(0u, p, min_sep, band));
-        atomicStore(&patch_key0[p], 0u); // for the next batch's posts, which follow this batch's barriers
+        // Reset for the next batch's posts, which follow this batch's barriers.
+        let key = max(atomicExchange(&patch_ak[2u * p + 1u], 0u), slot_key(0u, p, min_sep, band));
         let code = key & IDX_MASK;
         if (code != 0u) {
-            patch_slot[p * 4u] = cand_pd[cb + code - 1u];
+            patch_data[pd_slot(p, 0u)] = cand_pd[cb + code - 1u];
         }
         atomicStore(&patch_key[p], slot_key(1u, p, min_sep, band));
     }
-    for (var k = 1u; k < 4u; k++) {
-        workgroupBarrier();
-        if (mine < MAX_PATCHES) {
-            let m = slot_metric(k, mine, my.xyz, my.w, min_sep, band);
-            if (m > NEG_INF) {
-                atomicMax(&patch_key[mine], ordered(m) | (lid + 1u));
-            }
-        }
-        workgroupBarrier();
-        for (var p = lid; p < pc; p += WG) {
-            let key = atomicLoad(&patch_key[p]);
-            let code = key & IDX_MASK;
-            if (code != 0u) {
-                patch_slot[p * 4u + k] = cand_pd[cb + code - 1u];
-            } else if (key == 0u) {
-                // Neither the current contact (no longer eligible: too close to or far above the new
-                // deepest) nor a candidate qualifies: the slot empties.
-                patch_slot[p * 4u + k] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
-            }
-            if (k < 3u) {
-                atomicStore(&patch_key[p], slot_key(k + 1u, p, min_sep, band));
-            }
+    // Written out with a constant k each: lavapipe runs both sides of every branch, so slot_metric and
+    // slot_key with a loop's k paid for every slot's reads.
+    slot_round(1u, lid, mine, my, pc, cb, min_sep, band);
+    slot_round(2u, lid, mine, my, pc, cb, min_sep, band);
+    slot_round(3u, lid, mine, my, pc, cb, min_sep, band);
+    return pc;
+}
+
+// Slot round k (1-3) of reduce_batch: members post their metric for slot k, then each patch takes the arg-max.
+fn slot_round(k: u32, lid: u32, mine: u32, my: vec4<f32>, pc: u32, cb: u32, min_sep: f32, band: f32) {
+    workgroupBarrier();
+    if (mine < MAX_PATCHES) {
+        let m = slot_metric(k, mine, my.xyz, my.w, min_sep, band);
+        if (m > NEG_INF) {
+            atomicMax(&patch_key[mine], ordered(m) | (lid + 1u));
         }
     }
-    return pc;
+    workgroupBarrier();
+    for (var p = lid; p < pc; p += WG) {
+        let key = atomicLoad(&patch_key[p]);
+        let code = key & IDX_MASK;
+        if (code != 0u) {
+            patch_data[pd_slot(p, k)] = cand_pd[cb + code - 1u];
+        } else if (key == 0u) {
+            // Neither the current contact (no longer eligible: too close to or far above the new
+            // deepest) nor a candidate qualifies: the slot empties.
+            patch_data[pd_slot(p, k)] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
+        }
+        if (k < 3u) {
+            atomicStore(&patch_key[p], slot_key(k + 1u, p, min_sep, band));
+        }
+    }
 }
 
 // Initial key of slot k of patch p: its current contact's metric, 0 when empty or not eligible.
 fn slot_key(k: u32, p: u32, min_sep: f32, band: f32) -> u32 {
-    let s = patch_slot[p * 4u + k];
+    let s = patch_data[pd_slot(p, k)];
     if (s.w < VALID_BELOW) {
         let m = slot_metric(k, p, s.xyz, s.w, min_sep, band);
         if (m > NEG_INF) {

@@ -6,6 +6,8 @@ use super::ContactConfig;
 use glam::{Vec3, Vec4};
 
 pub(crate) const COMMON_WGSL: &str = include_str!("common.wgsl");
+const REDUCE_PLAIN_WGSL: &str = include_str!("reduce_plain.wgsl");
+const REDUCE_SUBGROUP_WGSL: &str = include_str!("reduce_subgroup.wgsl");
 pub(crate) const GENERATE_WGSL: &str = concat!(
     include_str!("generate.wgsl"),
     include_str!("generate_core.wgsl"),
@@ -17,15 +19,28 @@ pub(crate) const GENERATE_WGSL: &str = concat!(
 /// The WGSL module of a kernel with the patch budget substituted and the default workgroup size (for
 /// kernels that do not reduce: normals, solver).
 pub fn shader_source(kernel_wgsl: &str, max_patches: u32, kinds: SdfKinds) -> String {
-    shader_source_wg(kernel_wgsl, max_patches, ContactConfig::default().workgroup_size, kinds)
+    shader_source_wg(kernel_wgsl, max_patches, ContactConfig::default().workgroup_size, kinds, false)
 }
 
-/// Which optional SDF kinds a pipeline's model uses. Each kind's branch in `sdf_sample` (sdf_sample.wgsl)
-/// is compiled in only when used: lavapipe inlines every call, and the revolved field's 15 written-out
-/// segments inlined at the generate kernel's ~6 sample sites doubled its run time on the nut-bolt pair
-/// even though no pair took that branch (measured 2026-11-22: 1300 vs 640 ms per frame at 64 worlds).
+/// Whether the reducing kernels built on `gpu` with `cfg` use subgroup operations (reduce_subgroup.wgsl):
+/// when the config allows it and the device has them, with at least 8 lanes per subgroup.
+pub fn reduce_with_subgroups(gpu: &crate::gpu::GpuContext, cfg: &ContactConfig) -> bool {
+    cfg.subgroups && gpu.device.features().contains(wgpu::Features::SUBGROUP) && gpu.info.subgroup_min_size >= 8
+}
+
+/// Which SDF kinds a pipeline's model uses. Each kind's branch in `sdf_sample` (sdf_sample.wgsl) is compiled
+/// in only when used: lavapipe inlines every call and runs both sides of every branch under a lane mask, so an
+/// unused kind costs its whole body at every sample site. Measured on the nut-bolt pair at 64 worlds: the
+/// revolved field's 15 written-out segments doubled generate's run time (2026-11-22: 1300 vs 640 ms per
+/// frame), the grid's 8 lane-by-lane reads made generation alone 1.6x slower (2026-12-02).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SdfKinds {
+    /// Some pair's SDF is a voxel grid (kind 0).
+    pub grid: bool,
+    /// Some pair's SDF is the half-space below a plane (kind 1).
+    pub plane: bool,
+    /// Some pair's SDF is the analytic thread (kind 2).
+    pub thread: bool,
     /// Some pair's SDF is a solid of revolution (kind 3).
     pub revolved: bool,
 }
@@ -33,16 +48,36 @@ pub struct SdfKinds {
 impl SdfKinds {
     /// The kinds the pairs of a flattened model use.
     pub fn of(pairs: &[crate::contact::model::PairGpu]) -> Self {
-        SdfKinds { revolved: pairs.iter().any(|p| p.sdf_kind == 3) }
+        let has = |k: u32| pairs.iter().any(|p| p.sdf_kind == k);
+        SdfKinds { grid: has(0), plane: has(1), thread: has(2), revolved: has(3) }
+    }
+
+    /// All 16 combinations (shader validation tests).
+    #[cfg(test)]
+    pub(crate) fn combinations() -> impl Iterator<Item = SdfKinds> {
+        (0..16u32).map(|m| SdfKinds { grid: m & 1 != 0, plane: m & 2 != 0, thread: m & 4 != 0, revolved: m & 8 != 0 })
     }
 }
 
-/// The WGSL module of a kernel with the patch budget and the reduction's workgroup size substituted.
-pub fn shader_source_wg(kernel_wgsl: &str, max_patches: u32, workgroup_size: u32, kinds: SdfKinds) -> String {
+/// The WGSL module of a kernel with the patch budget and the reduction's workgroup size substituted, and the
+/// reduction's helpers with or without subgroup operations (the device must have wgpu::Features::SUBGROUP).
+pub fn shader_source_wg(
+    kernel_wgsl: &str,
+    max_patches: u32,
+    workgroup_size: u32,
+    kinds: SdfKinds,
+    subgroups: bool,
+) -> String {
     let common = COMMON_WGSL
         .replace("MAX_PATCHES_VALUE", &format!("{max_patches}u"))
         .replace("WG_VALUE", &format!("{workgroup_size}u"));
-    format!("{common}\n{kernel_wgsl}").replace("HAS_REVOLVED_VALUE", if kinds.revolved { "true" } else { "false" })
+    let flag = |b: bool| if b { "true" } else { "false" };
+    let helpers = if subgroups { REDUCE_SUBGROUP_WGSL } else { REDUCE_PLAIN_WGSL };
+    format!("{common}\n{helpers}\n{kernel_wgsl}")
+        .replace("HAS_GRID_VALUE", flag(kinds.grid))
+        .replace("HAS_PLANE_VALUE", flag(kinds.plane))
+        .replace("HAS_THREAD_VALUE", flag(kinds.thread))
+        .replace("HAS_REVOLVED_VALUE", flag(kinds.revolved))
 }
 
 /// Builds a compute pipeline from WGSL with an automatic layout.
@@ -82,12 +117,13 @@ pub struct GenerateKernel {
 }
 
 impl GenerateKernel {
-    pub fn new(device: &wgpu::Device, cfg: &ContactConfig, kinds: SdfKinds) -> Self {
+    /// `subgroups`: see [`reduce_with_subgroups`].
+    pub fn new(device: &wgpu::Device, cfg: &ContactConfig, kinds: SdfKinds, subgroups: bool) -> Self {
         GenerateKernel {
             pipeline: compute_pipeline(
                 device,
                 "contact-generate",
-                &shader_source_wg(GENERATE_WGSL, cfg.max_patches, cfg.workgroup_size, kinds),
+                &shader_source_wg(GENERATE_WGSL, cfg.max_patches, cfg.workgroup_size, kinds, subgroups),
                 "generate",
             ),
         }

@@ -47,6 +47,7 @@ fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wi
         }
         return;
     }
+    sdf_bind(pair);
     let out = generate_job(lid, pair, job.tri_first, job.tri_count, world_a, world_b, (world * params.job_count + job_index) * MAX_PATCHES);
     if (out.y > 0u) {
         atomicAdd(&pair_candidates[world * params.pair_count + job.pair], out.y);

@@ -86,8 +86,8 @@ fn minimise_on_triangle(
 // One job's work (the body of a generate workgroup): query triangles [tri_first, tri_first + tri_count) of
 // shape A posed at world_a against the SDF of shape B posed at world_b, reduced in workgroup memory; the
 // job's patches are written, in world coordinates, to job_patches[out_base..]. Returns (patches,
-// candidates). Called in uniform control flow (it holds the reduction's barriers). The caller declares
-// params, tri_verts and job_patches (generate.wgsl; crowd/generate.wgsl).
+// candidates). Called in uniform control flow (it holds the reduction's barriers), after sdf_bind(pair). The
+// caller declares params, tri_verts and job_patches (generate.wgsl; crowd/contacts.wgsl).
 fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: Transform, world_b: Transform, out_base: u32) -> vec2<u32> {
     let b_from_a = xf_mul(xf_inv(world_b), world_a);
     let offset = pair.contact_offset;
@@ -130,9 +130,9 @@ fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: T
     // Write this job's patches in world coordinates.
     for (var p = lid; p < pc; p += WG) {
         var o: PatchOut;
-        o.normal = vec4<f32>(quat_rotate(world_b.q, patch_n[p].xyz), f32(atomicLoad(&patch_area[p])) * pair.area_unit);
+        o.normal = vec4<f32>(quat_rotate(world_b.q, patch_data[pd_normal(p)].xyz), f32(atomicLoad(&patch_ak[2u * p])) * pair.area_unit);
         for (var s = 0u; s < 4u; s++) {
-            let sl = patch_slot[p * 4u + s];
+            let sl = patch_data[pd_slot(p, s)];
             if (sl.w < VALID_BELOW) {
                 o.slots[s] = vec4<f32>(xf_point(world_b, sl.xyz), sl.w);
             } else {

@@ -14,12 +14,13 @@ pub struct MergeKernel {
 }
 
 impl MergeKernel {
-    pub fn new(device: &wgpu::Device, cfg: &ContactConfig) -> Self {
+    /// `subgroups`: see [`reduce_with_subgroups`](super::generate::reduce_with_subgroups).
+    pub fn new(device: &wgpu::Device, cfg: &ContactConfig, subgroups: bool) -> Self {
         MergeKernel {
             pipeline: compute_pipeline(
                 device,
                 "contact-merge",
-                &shader_source_wg(MERGE_WGSL, cfg.max_patches, cfg.workgroup_size, Default::default()),
+                &shader_source_wg(MERGE_WGSL, cfg.max_patches, cfg.workgroup_size, Default::default(), subgroups),
                 "merge",
             ),
         }
@@ -75,16 +76,15 @@ mod tests {
         for wg in [32, 64, 128, 256] {
             for max_patches in [16, 64, 256] {
                 for (name, wgsl) in [("generate", GENERATE_WGSL), ("merge", MERGE_WGSL)] {
-                    let src = shader_source_wg(wgsl, max_patches, wg, Default::default());
-                    let module = naga::front::wgsl::parse_str(&src)
-                        .unwrap_or_else(|e| panic!("{name} wg {wg}: {}", e.emit_to_string(&src)));
-                    naga::valid::Validator::new(
-                        naga::valid::ValidationFlags::all(),
-                        naga::valid::Capabilities::empty(),
-                    )
-                    .validate(&module)
-                    .unwrap_or_else(|e| panic!("{name} wg {wg} max_patches {max_patches}: {e:?}"));
-                    assert_eq!(module.entry_points[0].workgroup_size, [wg, 1, 1], "{name}");
+                    for subgroups in [false, true] {
+                        let src = shader_source_wg(wgsl, max_patches, wg, Default::default(), subgroups);
+                        let module = naga::front::wgsl::parse_str(&src)
+                            .unwrap_or_else(|e| panic!("{name} wg {wg}: {}", e.emit_to_string(&src)));
+                        crate::contact::shader_tests::validator(subgroups)
+                            .validate(&module)
+                            .unwrap_or_else(|e| panic!("{name} wg {wg} max_patches {max_patches}: {e:?}"));
+                        assert_eq!(module.entry_points[0].workgroup_size, [wg, 1, 1], "{name}");
+                    }
                 }
             }
         }

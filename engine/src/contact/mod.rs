@@ -48,6 +48,10 @@ pub struct ContactConfig {
     /// 0.74 vs 1.31 at 1 world, 1.33 vs 1.57 at 64 worlds), except with the analytic bolt SDF at 64
     /// worlds (1.13 vs 0.87); on a GPU 64 is two warps or one wave64.
     pub workgroup_size: u32,
+    /// Use subgroup operations in the reduction where the device has them, with at least 8 lanes
+    /// (reduce_subgroup.wgsl; lavapipe has 8: about 1.1x faster there, see docs/BENCHMARKS.md); false: the
+    /// portable kernels. The results are bitwise the same either way.
+    pub subgroups: bool,
 }
 
 impl Default for ContactConfig {
@@ -58,6 +62,7 @@ impl Default for ContactConfig {
             iterations: 12,
             chunk_triangles: 0,
             workgroup_size: 64,
+            subgroups: true,
         }
     }
 }
@@ -78,13 +83,14 @@ impl ContactConfig {
         n.div_ceil(self.workgroup_size) + 1
     }
 
-    /// Worst-case loop back edges of one `reduce_batch` (common.wgsl) per invocation: Assign (unrolled by
-    /// 4), at most one new-patch round per candidate plus the last, each with the eviction's strided
-    /// arg-min, slot 0's strided write and the loop of slot rounds 1-3 with their strided writes.
+    /// Worst-case loop back edges of one `reduce_batch` (common.wgsl) per invocation: Assign (the portable
+    /// one's, unrolled by 4 in reduce_plain.wgsl; the subgroup one takes 8 patches per pass), at most one
+    /// new-patch round per candidate plus the last, each with the eviction's strided arg-min, slot 0's
+    /// strided write and slot rounds 1-3 (written out) with their strided writes.
     fn reduce_batch_loops(&self) -> u32 {
         let assign = self.max_patches.div_ceil(4) + 1;
         let rounds = (self.workgroup_size + 1) * (1 + self.strided(self.max_patches + 1));
-        let slots = self.strided(self.max_patches) + 4 + 3 * self.strided(self.max_patches);
+        let slots = self.strided(self.max_patches) + 3 * self.strided(self.max_patches);
         assign + rounds + slots
     }
 
@@ -188,12 +194,11 @@ impl ContactConfig {
     }
 
     /// Bytes of workgroup memory the generate and merge kernels declare (common.wgsl): the batch (`cand_pd`
-    /// double-buffered, `cand_n`: 3 x 16 bytes per invocation), the patch list (`patch_n` 16,
-    /// `patch_area` 4, `patch_slot` 4 x 16, `patch_key` and `patch_key0` 4 each per patch, budget + 1
-    /// patches) and `wg_best`, `wg_victim` (12 bytes).
+    /// double-buffered, `cand_n`: 3 x 16 bytes per invocation), the patch list (`patch_data` 5 x 16,
+    /// `patch_ak` 2 x 4, `patch_key` 4 per patch, budget + 1 patches) and `wg_best`, `wg_victim` (12 bytes).
     pub fn workgroup_bytes(&self) -> u32 {
         let cap = self.max_patches + 1;
-        self.workgroup_size * 16 * 3 + cap * (16 + 4 + 4 * 16 + 4 + 4) + 12
+        self.workgroup_size * 16 * 3 + cap * (5 * 16 + 2 * 4 + 4) + 12
     }
 }
 

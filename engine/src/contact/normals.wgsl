@@ -35,6 +35,7 @@ fn normals(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let pair = pairs[pair_index];
+    sdf_bind(pair);
     var body_b = Transform(vec4<f32>(0.0), vec4<f32>(0.0, 0.0, 0.0, 1.0));
     if (pair.body_b != NONE) {
         body_b = body_q[world * params.body_count + pair.body_b];

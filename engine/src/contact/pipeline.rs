@@ -184,8 +184,9 @@ impl ContactPipeline {
         );
         let patch_counts = gpu.storage_buffer_zeroed("patch_counts", 4 * (world_count * pair_count) as u64);
         let kinds = super::generate::SdfKinds::of(&flat.pairs);
-        let generate = GenerateKernel::new(dev, cfg, kinds);
-        let merge = MergeKernel::new(dev, cfg);
+        let subgroups = super::generate::reduce_with_subgroups(gpu, cfg);
+        let generate = GenerateKernel::new(dev, cfg, kinds, subgroups);
+        let merge = MergeKernel::new(dev, cfg, subgroups);
         let normals = NormalsKernel::new(dev, cfg, kinds);
         let contact_normals = gpu.storage_buffer_zeroed(
             "contact_normals",

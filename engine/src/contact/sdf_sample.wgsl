@@ -2,8 +2,14 @@
 // concatenates it after the kernel, which must bind `sdf_values: array<u32>` (16-bit grid values packed in
 // pairs, or analytic parameters; see model.rs).
 
-// Whether the model has a kind-3 pair (substituted by the host, generate.rs SdfKinds): lavapipe inlines every
-// call, so an unused branch to the revolved field would still be compiled in at every sample site.
+// Which SDF kinds the model has (substituted by the host, generate.rs SdfKinds): the others' branches are
+// compiled out. lavapipe inlines every call and runs both sides of every branch under a lane mask, so an
+// unused kind still cost its whole body at every sample site: the grid's 8 lane-by-lane reads made the thread
+// samples of the nut-bolt pair 1.6x slower (measured 2026-12-02), the revolved field's 15 segments doubled
+// them (2026-11-22).
+const HAS_GRID: bool = HAS_GRID_VALUE;
+const HAS_PLANE: bool = HAS_PLANE_VALUE;
+const HAS_THREAD: bool = HAS_THREAD_VALUE;
 const HAS_REVOLVED: bool = HAS_REVOLVED_VALUE;
 
 struct Sample {
@@ -22,15 +28,20 @@ fn sdf_at(pair: Pair, i: u32, j: u32, k: u32) -> f32 {
 // Trilinear value and its exact gradient; outside the grid box the distance to the box is added.
 // Mirrors SdfGrid::sample (kind 0), the half-space z < 0 of the shape frame (kind 1) and the analytic
 // threaded bolt (kind 2, thread.wgsl) and the solid of revolution (kind 3, revolved.wgsl).
+// The analytic kinds read their parameters from `analytic_words`: call sdf_bind(pair) first, in the same
+// invocation, whenever the pair changes.
 fn sdf_sample(pair: Pair, p: vec3<f32>) -> Sample {
-    if (pair.sdf_kind == 1u) {
+    if (HAS_PLANE && pair.sdf_kind == 1u) {
         return Sample(p.z, vec3<f32>(0.0, 0.0, 1.0));
     }
-    if (pair.sdf_kind == 2u) {
-        return thread_sample(pair.sdf_dims.w, p);
+    if (HAS_THREAD && pair.sdf_kind == 2u) {
+        return thread_sample(p);
     }
     if (HAS_REVOLVED && pair.sdf_kind == 3u) {
-        return revolved_sample(pair.sdf_dims.w, p);
+        return revolved_sample(p);
+    }
+    if (!HAS_GRID) {
+        return Sample(3.0e38, vec3<f32>(0.0, 0.0, 1.0)); // no such pair in this model
     }
     let lo = pair.sdf_origin.xyz;
     let h = pair.sdf_origin.w;
@@ -68,3 +79,12 @@ fn sdf_sample(pair: Pair, p: vec3<f32>) -> Sample {
     return Sample(d, vec3<f32>(dx, dy, dz) / h);
 }
 
+// Loads the pair's analytic SDF parameters (thread, revolved) into analytic_words for sdf_sample.
+fn sdf_bind(pair: Pair) {
+    if (HAS_THREAD && pair.sdf_kind == 2u) {
+        analytic_load_thread(pair.sdf_dims.w);
+    }
+    if (HAS_REVOLVED && pair.sdf_kind == 3u) {
+        analytic_load_revolved(pair.sdf_dims.w);
+    }
+}

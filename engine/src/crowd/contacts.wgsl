@@ -61,6 +61,7 @@ fn crowd_generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
     // its triangles' culls; most of a near pair's surface is far from the other shape. Two voxels of
     // slack for a grid: trilinear interpolation can be off by up to sqrt(3)/2 of a voxel either side.
     let bound = job_bounds[pair.crowd_template * jobs + k];
+    sdf_bind(pair);
     let sc = sdf_sample(pair, xf_point(xf_mul(xf_inv(world_b), world_a), bound.xyz));
     let slack = select(2.0 * pair.sdf_origin.w, 0.0, pair.sdf_kind == 1u);
     if (bound.w < 0.0 || sc.d - bound.w - slack > pair.contact_offset) {

@@ -3,7 +3,7 @@
 //! the colouring and bitwise determinism.
 
 use super::{CrowdConfig, CrowdFlat, CrowdFrame, CrowdModel, NearPair, COLOUR_NONE, UNCOLOURED};
-use crate::contact::generate::{shader_source_wg, SdfKinds};
+use crate::contact::generate::{reduce_with_subgroups, shader_source_wg, SdfKinds};
 use crate::contact::model::{PairGpu, ParamsGpu, PatchGpu};
 use crate::contact::pipeline::to_patches;
 use crate::contact::{ContactConfig, Patch, TransformGpu};
@@ -306,7 +306,10 @@ impl CrowdPipeline {
         let rw = Binding::Storage { read_only: false };
         let kinds = SdfKinds::of(&flat.flat.pairs);
         let wg = contact.workgroup_size;
-        let source = |body: &str| shader_source_wg(&format!("{CROWD_COMMON}\n{body}"), contact.max_patches, wg, kinds);
+        let subgroups = reduce_with_subgroups(gpu, contact);
+        let source = |body: &str| {
+            shader_source_wg(&format!("{CROWD_COMMON}\n{body}"), contact.max_patches, wg, kinds, subgroups)
+        };
         let near_layout = gpu.explicit_layout(
             "crowd-near",
             &[&[Binding::Uniform, ro, ro], &[ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
@@ -667,13 +670,15 @@ mod tests {
             [("near", NEAR_WGSL), ("contacts", CONTACTS_WGSL), ("merge", MERGE_WGSL), ("solve", SOLVE_WGSL)]
         {
             for (max_patches, wg) in [(16, 64), (64, 256)] {
-                for revolved in [false, true] {
-                    let src =
-                        shader_source_wg(&format!("{CROWD_COMMON}\n{body}"), max_patches, wg, SdfKinds { revolved });
-                    if let Err(e) = crate::contact::shader_tests::validate(&src) {
-                        panic!(
-                            "crowd {name}.wgsl, max_patches {max_patches}, workgroup {wg}, revolved {revolved}:\n{e}"
-                        );
+                for kinds in SdfKinds::combinations() {
+                    for subgroups in [false, true] {
+                        let src =
+                            shader_source_wg(&format!("{CROWD_COMMON}\n{body}"), max_patches, wg, kinds, subgroups);
+                        if let Err(e) = crate::contact::shader_tests::validate(&src, subgroups) {
+                            panic!(
+                                "crowd {name}.wgsl, max_patches {max_patches}, workgroup {wg}, {kinds:?}, subgroups {subgroups}:\n{e}"
+                            );
+                        }
                     }
                 }
             }

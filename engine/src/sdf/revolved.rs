@@ -462,7 +462,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if (i >= arrayLength(&points)) {
         return;
     }
-    let s = revolved_sample(bitcast<u32>(points[i].w), points[i].xyz);
+    analytic_load_revolved(bitcast<u32>(points[i].w));
+    let s = revolved_sample(points[i].xyz);
     out[i] = vec4<f32>(s.g, s.d);
 }
 ";

@@ -1,12 +1,72 @@
 // Analytic SDF of a threaded bolt (sdf_kind 2): WGSL twin of engine/src/sdf/thread.rs, which documents the
-// method. Parameters are 12 f32 words in `sdf_values` starting at `base` (ThreadSdf::to_words).
+// method. Parameters are 12 f32 words (ThreadSdf::to_words), read from `analytic_words`.
+
+// An analytic SDF's parameter words (ThreadSdf::to_words, RevolvedSdf::to_words), copied from `sdf_values`
+// once per pair (analytic_load_*; sdf_sample.wgsl sdf_bind) and read at constant indices while sampling.
+// lavapipe reads storage memory one lane and one word at a time, even at a uniform index: reading the 11
+// words per sample from `sdf_values` took 30% of contact generation on the nut-bolt pair (measured
+// 2026-12-02); private words at constant indices stay in registers (on a GPU too). Written out, not looped:
+// lavapipe counts every loop pass against one budget per invocation (contact/common.wgsl).
+const ANALYTIC_WORDS: u32 = 33u; // REVOLVED_WORDS, the longest block
+var<private> analytic_words: array<u32, ANALYTIC_WORDS>;
+
+fn analytic_load_thread(base: u32) {
+    analytic_words[0u] = sdf_values[base + 0u];
+    analytic_words[1u] = sdf_values[base + 1u];
+    analytic_words[2u] = sdf_values[base + 2u];
+    analytic_words[3u] = sdf_values[base + 3u];
+    analytic_words[4u] = sdf_values[base + 4u];
+    analytic_words[5u] = sdf_values[base + 5u];
+    analytic_words[6u] = sdf_values[base + 6u];
+    analytic_words[7u] = sdf_values[base + 7u];
+    analytic_words[8u] = sdf_values[base + 8u];
+    analytic_words[9u] = sdf_values[base + 9u];
+    analytic_words[10u] = sdf_values[base + 10u];
+    analytic_words[11u] = sdf_values[base + 11u];
+}
+
+fn analytic_load_revolved(base: u32) {
+    analytic_words[0u] = sdf_values[base + 0u];
+    analytic_words[1u] = sdf_values[base + 1u];
+    analytic_words[2u] = sdf_values[base + 2u];
+    analytic_words[3u] = sdf_values[base + 3u];
+    analytic_words[4u] = sdf_values[base + 4u];
+    analytic_words[5u] = sdf_values[base + 5u];
+    analytic_words[6u] = sdf_values[base + 6u];
+    analytic_words[7u] = sdf_values[base + 7u];
+    analytic_words[8u] = sdf_values[base + 8u];
+    analytic_words[9u] = sdf_values[base + 9u];
+    analytic_words[10u] = sdf_values[base + 10u];
+    analytic_words[11u] = sdf_values[base + 11u];
+    analytic_words[12u] = sdf_values[base + 12u];
+    analytic_words[13u] = sdf_values[base + 13u];
+    analytic_words[14u] = sdf_values[base + 14u];
+    analytic_words[15u] = sdf_values[base + 15u];
+    analytic_words[16u] = sdf_values[base + 16u];
+    analytic_words[17u] = sdf_values[base + 17u];
+    analytic_words[18u] = sdf_values[base + 18u];
+    analytic_words[19u] = sdf_values[base + 19u];
+    analytic_words[20u] = sdf_values[base + 20u];
+    analytic_words[21u] = sdf_values[base + 21u];
+    analytic_words[22u] = sdf_values[base + 22u];
+    analytic_words[23u] = sdf_values[base + 23u];
+    analytic_words[24u] = sdf_values[base + 24u];
+    analytic_words[25u] = sdf_values[base + 25u];
+    analytic_words[26u] = sdf_values[base + 26u];
+    analytic_words[27u] = sdf_values[base + 27u];
+    analytic_words[28u] = sdf_values[base + 28u];
+    analytic_words[29u] = sdf_values[base + 29u];
+    analytic_words[30u] = sdf_values[base + 30u];
+    analytic_words[31u] = sdf_values[base + 31u];
+    analytic_words[32u] = sdf_values[base + 32u];
+}
 
 const SQRT3_T: f32 = 1.7320508;
 // [m], see thread_sample.
 const HEAD_SKIP_MARGIN: f32 = 1.0e-6;
 
-fn tw(base: u32, i: u32) -> f32 {
-    return bitcast<f32>(sdf_values[base + i]);
+fn tw(i: u32) -> f32 {
+    return bitcast<f32>(analytic_words[i]);
 }
 
 struct Closest {
@@ -67,12 +127,12 @@ fn hex_prism_sample(apothem: f32, z0: f32, z1: f32, p: vec3<f32>) -> Sample {
     return Sample(dz, vec3<f32>(0.0, 0.0, sz));
 }
 
-fn thread_sample(base: u32, p: vec3<f32>) -> Sample {
-    let pitch = tw(base, 0u);
-    let phase = tw(base, 1u);
-    let pitch_radius = tw(base, 2u);
-    let min_radius = tw(base, 3u);
-    let max_radius = tw(base, 4u);
+fn thread_sample(p: vec3<f32>) -> Sample {
+    let pitch = tw(0u);
+    let phase = tw(1u);
+    let pitch_radius = tw(2u);
+    let min_radius = tw(3u);
+    let max_radius = tw(4u);
     let rho = max(sqrt(p.x * p.x + p.y * p.y), 1.0e-9);
     let radial = vec3<f32>(p.x / rho, p.y / rho, 0.0);
     let theta = atan2(p.y, p.x);
@@ -108,12 +168,12 @@ fn thread_sample(base: u32, p: vec3<f32>) -> Sample {
     let tangential = vec3<f32>(-radial.y, radial.x, 0.0);
     var d = s2.d;
     var g = radial * s2.g.y + (vec3<f32>(0.0, 0.0, 1.0) - tangential * (lead / rho)) * (s2.g.x * sign_w);
-    let below = tw(base, 5u) - p.z;
+    let below = tw(5u) - p.z;
     if (below > d) {
         d = below;
         g = vec3<f32>(0.0, 0.0, -1.0);
     }
-    let above = p.z - tw(base, 6u);
+    let above = p.z - tw(6u);
     if (above > d) {
         d = above;
         g = vec3<f32>(0.0, 0.0, 1.0);
@@ -121,11 +181,11 @@ fn thread_sample(base: u32, p: vec3<f32>) -> Sample {
     // The head's field is at least its slab's (|z - zc| - half height; hex_prism_sample never returns
     // less, up to rounding: hence the 1 um margin), so beside the thread it cannot win: skip its two
     // segment projections and square roots (most samples of a nut on the thread are far above the head).
-    let head_z0 = tw(base, 9u);
-    let head_z1 = tw(base, 10u);
+    let head_z0 = tw(9u);
+    let head_z1 = tw(10u);
     let head_slab = abs(p.z - 0.5 * (head_z0 + head_z1)) - 0.5 * (head_z1 - head_z0);
-    if (tw(base, 7u) != 0.0 && head_slab < d + HEAD_SKIP_MARGIN) {
-        let h = hex_prism_sample(tw(base, 8u), head_z0, head_z1, p);
+    if (tw(7u) != 0.0 && head_slab < d + HEAD_SKIP_MARGIN) {
+        let h = hex_prism_sample(tw(8u), head_z0, head_z1, p);
         if (h.d < d) {
             d = h.d;
             g = h.g;

@@ -381,6 +381,9 @@ fn pair_pass(world: u32, p: u32, first: u32, count: u32, h: f32, bias: bool, war
         return;
     }
     let pair = pairs[p];
+    if (resample) {
+        sdf_bind(pair); // for solve_row's samples
+    }
     let c = PairCtx(pair, view(world, pair.body_a), view(world, pair.body_b), dyn_of(world, pair.body_a), dyn_of(world, pair.body_b));
     var vla = vel_load(c.da);
     var vlb = vel_load(c.db);
