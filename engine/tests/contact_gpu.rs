@@ -165,18 +165,7 @@ fn gpu_cpu_parity_on_seeded_triangles() {
         let (e0, e1, e2) = (e(), e(), e());
         tris.push([c + e0, c + e1, c + e2]);
     }
-    let query = Arc::new(QueryShape { triangles: tris, radius: 0.0 });
-    let pair = PairSpec {
-        body_a: 0,
-        a_pose: (Vec3::ZERO, Quat::IDENTITY),
-        query,
-        body_b: 1,
-        b_pose: (Vec3::ZERO, Quat::IDENTITY),
-        sdf: SdfShape::Grid(grid),
-        contact_offset: 0.003,
-        friction: 0.0,
-    };
-    let model = ContactModel { body_count: 2, pairs: vec![pair] };
+    let model = soup_vs_grid(tris, grid);
     let worlds = 5;
     let mut poses = Vec::new();
     for w in 0..worlds {
@@ -194,6 +183,31 @@ fn gpu_cpu_parity_on_seeded_triangles() {
             assert_patch_sets_match(&gpu.patches[w], &cpu.patches[w], &format!("world {w}"));
         }
     }
+}
+
+/// One frictionless pair: `triangles` (body 0) against `grid` (body 1), contact offset 3 mm.
+fn soup_vs_grid(triangles: Vec<[Vec3; 3]>, grid: Arc<SdfGrid>) -> ContactModel {
+    let pair = PairSpec {
+        body_a: 0,
+        a_pose: (Vec3::ZERO, Quat::IDENTITY),
+        query: Arc::new(QueryShape { triangles, radius: 0.0 }),
+        body_b: 1,
+        b_pose: (Vec3::ZERO, Quat::IDENTITY),
+        sdf: SdfShape::Grid(grid),
+        contact_offset: 0.003,
+        friction: 0.0,
+    };
+    ContactModel { body_count: 2, pairs: vec![pair] }
+}
+
+/// Body poses of `worlds` worlds: body 0 raised 1 mm and turned 0.3 rad more per world, body 1 at rest.
+fn turned_poses(worlds: u32) -> Vec<TransformGpu> {
+    let mut poses = Vec::new();
+    for w in 0..worlds {
+        poses.push(TransformGpu::new(Vec3::new(0.0, 0.0, 0.001 * w as f32), Quat::from_rotation_z(0.3 * w as f32)));
+        poses.push(TransformGpu::new(Vec3::ZERO, Quat::IDENTITY));
+    }
+    poses
 }
 
 /// `n` seeded small triangles scattered in a shell around a sphere of radius `r`: their normals point
@@ -232,26 +246,9 @@ fn longest_jobs_and_most_jobs_per_pair_lose_no_candidates_to_the_loop_limit() {
         // One job of the longest length; then the most jobs of 256 triangles one merge takes.
         for (triangles, chunk, jobs) in [(longest, longest, 1), (256 * most_jobs, 256, most_jobs)] {
             let cfg = ContactConfig { chunk_triangles: chunk, ..base.clone() };
-            let pair = PairSpec {
-                body_a: 0,
-                a_pose: (Vec3::ZERO, Quat::IDENTITY),
-                query: Arc::new(QueryShape { triangles: shell_soup(triangles, r, 0x9E3779B97F4A7C15), radius: 0.0 }),
-                body_b: 1,
-                b_pose: (Vec3::ZERO, Quat::IDENTITY),
-                sdf: SdfShape::Grid(grid.clone()),
-                contact_offset: 0.003,
-                friction: 0.0,
-            };
-            let model = ContactModel { body_count: 2, pairs: vec![pair] };
+            let model = soup_vs_grid(shell_soup(triangles, r, 0x9E3779B97F4A7C15), grid.clone());
             let worlds = 2;
-            let mut poses = Vec::new();
-            for w in 0..worlds {
-                poses.push(TransformGpu::new(
-                    Vec3::new(0.0, 0.0, 0.001 * w as f32),
-                    Quat::from_rotation_z(0.3 * w as f32),
-                ));
-                poses.push(TransformGpu::new(Vec3::ZERO, Quat::IDENTITY));
-            }
+            let poses = turned_poses(worlds);
             let g = gpu();
             let pipe = ContactPipeline::new(g, &model, worlds, &cfg).unwrap();
             assert_eq!(pipe.flat.jobs.len() as u32, jobs, "{cfg:?}");
@@ -280,23 +277,9 @@ fn subgroup_and_portable_reductions_give_bitwise_the_same_patches() {
     }
     let r = 0.05;
     let grid = Arc::new(sphere_grid(r, 48));
-    let pair = PairSpec {
-        body_a: 0,
-        a_pose: (Vec3::ZERO, Quat::IDENTITY),
-        query: Arc::new(QueryShape { triangles: shell_soup(3000, r, 0x2545F4914F6CDD1D), radius: 0.0 }),
-        body_b: 1,
-        b_pose: (Vec3::ZERO, Quat::IDENTITY),
-        sdf: SdfShape::Grid(grid),
-        contact_offset: 0.003,
-        friction: 0.0,
-    };
-    let model = ContactModel { body_count: 2, pairs: vec![pair] };
+    let model = soup_vs_grid(shell_soup(3000, r, 0x2545F4914F6CDD1D), grid);
     let worlds = 3;
-    let mut poses = Vec::new();
-    for w in 0..worlds {
-        poses.push(TransformGpu::new(Vec3::new(0.0, 0.0, 0.001 * w as f32), Quat::from_rotation_z(0.3 * w as f32)));
-        poses.push(TransformGpu::new(Vec3::ZERO, Quat::IDENTITY));
-    }
+    let poses = turned_poses(worlds);
     for max_patches in [16, 64] {
         let out = |subgroups: bool| {
             let cfg = ContactConfig { max_patches, chunk_triangles: 1024, subgroups, ..Default::default() };

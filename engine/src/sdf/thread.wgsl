@@ -26,18 +26,7 @@ fn analytic_load_thread(base: u32) {
 }
 
 fn analytic_load_revolved(base: u32) {
-    analytic_words[0u] = sdf_values[base + 0u];
-    analytic_words[1u] = sdf_values[base + 1u];
-    analytic_words[2u] = sdf_values[base + 2u];
-    analytic_words[3u] = sdf_values[base + 3u];
-    analytic_words[4u] = sdf_values[base + 4u];
-    analytic_words[5u] = sdf_values[base + 5u];
-    analytic_words[6u] = sdf_values[base + 6u];
-    analytic_words[7u] = sdf_values[base + 7u];
-    analytic_words[8u] = sdf_values[base + 8u];
-    analytic_words[9u] = sdf_values[base + 9u];
-    analytic_words[10u] = sdf_values[base + 10u];
-    analytic_words[11u] = sdf_values[base + 11u];
+    analytic_load_thread(base); // words 0-11
     analytic_words[12u] = sdf_values[base + 12u];
     analytic_words[13u] = sdf_values[base + 13u];
     analytic_words[14u] = sdf_values[base + 14u];
