@@ -23,6 +23,8 @@ struct CrowdParams {
 // and phase.
 struct PassParams {
     index: u32,
+    // The phase's flags (gpu.rs PHASES); the host picks the crowd_pass entry point by warm and resample,
+    // which the kernels therefore do not read.
     warm: u32,
     bias: u32,
     resample: u32,

@@ -122,7 +122,7 @@ pub struct CrowdPipeline {
     near: [wgpu::ComputePipeline; 7],
     contacts: [wgpu::ComputePipeline; 2],
     merge: wgpu::ComputePipeline,
-    solve: [wgpu::ComputePipeline; 5],
+    solve: [wgpu::ComputePipeline; 7],
     near_groups: Vec<wgpu::BindGroup>,
     round_groups: Vec<wgpu::BindGroup>,
     contact_groups: Vec<wgpu::BindGroup>,
@@ -340,10 +340,18 @@ impl CrowdPipeline {
                 .try_into()
                 .unwrap_or_else(|_| unreachable!());
         let merge = gpu.pipeline_on(&merge_layout, "crowd_merge", &source(MERGE_WGSL), "crowd_merge");
-        let solve: [wgpu::ComputePipeline; 5] = build(
+        let solve: [wgpu::ComputePipeline; 7] = build(
             &solve_layout,
             &source(SOLVE_WGSL),
-            &["crowd_build_rows", "crowd_velocities", "crowd_pass", "crowd_positions", "crowd_finish"],
+            &[
+                "crowd_build_rows",
+                "crowd_velocities",
+                "crowd_pass",
+                "crowd_positions",
+                "crowd_finish",
+                "crowd_pass_resample",
+                "crowd_pass_warm",
+            ],
         )
         .try_into()
         .unwrap_or_else(|_| unreachable!());
@@ -525,8 +533,14 @@ impl CrowdPipeline {
         self.set(&mut pass, &self.solve[0], sg, None);
         pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
         let sweep = |pass: &mut wgpu::ComputePass, phase: u32| {
+            // The entry point for the phase's warm and resample flags (solve.wgsl crowd_pass*).
+            let kernel = match PHASES[phase as usize] {
+                [1, _, _] => &self.solve[6],
+                [0, _, 1] => &self.solve[5],
+                _ => &self.solve[2],
+            };
             for c in 0..self.cfg.max_colours {
-                self.set(pass, &self.solve[2], sg, Some(self.cfg.colour_rounds + phase * 32 + c));
+                self.set(pass, kernel, sg, Some(self.cfg.colour_rounds + phase * 32 + c));
                 pass.dispatch_workgroups_indirect(&self.args, (A_COLOUR + 3 * c as u64) * 4);
             }
         };

@@ -106,9 +106,26 @@ fn crowd_positions(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
 }
 
-// One pass over the pairs of colour pp.index: the warm start (pp.warm) or a Gauss-Seidel sweep.
+// One pass over the pairs of colour pp.index: the warm start or a Gauss-Seidel sweep, resampling each row's
+// SDF first or not. One entry point per kind of pass (the host picks it by the phase's pp.warm and
+// pp.resample): lavapipe runs both sides of every branch, so one kernel taking the flags at run time ran
+// the warm start, the solve and the SDF sampling, masked, in every pass.
 @compute @workgroup_size(64)
 fn crowd_pass(@builtin(global_invocation_id) gid: vec3<u32>) {
+    colour_pass(gid, false, false);
+}
+
+@compute @workgroup_size(64)
+fn crowd_pass_resample(@builtin(global_invocation_id) gid: vec3<u32>) {
+    colour_pass(gid, false, true);
+}
+
+@compute @workgroup_size(64)
+fn crowd_pass_warm(@builtin(global_invocation_id) gid: vec3<u32>) {
+    colour_pass(gid, true, false);
+}
+
+fn colour_pass(gid: vec3<u32>, warm: bool, resample: bool) {
     let k = gid.x;
     let w = gid.y;
     let c = pp.index;
@@ -122,7 +139,7 @@ fn crowd_pass(@builtin(global_invocation_id) gid: vec3<u32>) {
     let first = crowd_meta[m_row_first(w) + e];
     let par = frame_of(w) & 1u;
     let h = sp.dt / f32(sp.substeps);
-    pair_pass(w, w * cp.cap + e, crowd_row(par, w, first), count, h, pp.bias != 0u, pp.warm != 0u, pp.resample != 0u);
+    pair_pass(w, w * cp.cap + e, crowd_row(par, w, first), count, h, pp.bias != 0u, warm, resample);
 }
 
 // Per world: status (x: 1 ok, 0 diverged or not stepped; y: near pairs; z: flags) and the frame counter.

@@ -232,12 +232,14 @@ impl GpuSolver {
         // counts its passes from the frame's real patch counts and, over 7/8 of the budget, flags the world
         // instead of stepping it (`worlds_over_loop_budget`); refused here is only a step that could not be
         // taken even without contacts. Loop passes (solver.wgsl): counting and building visit every pair,
-        // each sweep and each warm start visits the pairs, the body loops run twice per substep.
+        // each sweep, each warm start and each of the two resample_rows visits the pairs, the body loops run
+        // twice per substep.
         let loop_budget = if gpu.is_software() { crate::contact::LOOP_ITERATION_LIMIT / 8 * 7 } else { 0 };
         if loop_budget > 0 {
             let (pairs, bodies) = (pair_count as u64 + 1, model.body_count() as u64 + 1);
             let sweeps = (cfg.pos_iters + cfg.vel_iters + 1) as u64;
-            let passes = 2 * pairs + cfg.substeps as u64 * (sweeps * (pairs + 2) + 2 * bodies + 1) + bodies + 1;
+            let passes =
+                2 * pairs + cfg.substeps as u64 * (sweeps * (pairs + 2) + 4 * pairs + 2 * bodies + 1) + bodies + 1;
             if passes > loop_budget as u64 {
                 return Err(EngineError::Config {
                     field: "substeps x (pos_iters + vel_iters) x pairs",

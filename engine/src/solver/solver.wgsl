@@ -26,11 +26,22 @@ fn row_index(row0: u32, p: u32, i: u32, k: u32) -> u32 {
 
 
 // One pass over the world's rows in order (pair, patch, slot), four rows (one patch) per loop pass
-// (lavapipe budgets loop passes): a Gauss-Seidel sweep (warm = false) or the warm start (warm = true).
-fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool, resample: bool) {
+// (lavapipe budgets loop passes): a Gauss-Seidel sweep (warm = false) or the warm start (warm = true), on the
+// normals and separations resample_rows stored.
+fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool) {
     for (var p = 0u; p < sp.pair_count; p++) {
         let count = patch_counts[world * sp.pair_count + p];
-        pair_pass(world, p, row_index(row0, p, 0u, 0u), count, h, bias, warm, resample);
+        pair_pass(world, p, row_index(row0, p, 0u, 0u), count, h, bias, warm, false);
+    }
+}
+
+// Samples every row's SDF at the world's current poses. The poses stand still during the sweeps that
+// follow, so this is what their first sweep did in-line, bitwise; done apart, the sweeps' flags are
+// constants: lavapipe runs both sides of every branch, so a sweep that took a run-time resample flag ran
+// the sampling code, masked, in every one of its 20 iterations (and each sweep inlined it).
+fn resample_rows(world: u32, row0: u32) {
+    for (var p = 0u; p < sp.pair_count; p++) {
+        resample_pair(world, p, row_index(row0, p, 0u, 0u), patch_counts[world * sp.pair_count + p]);
     }
 }
 
@@ -54,7 +65,8 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     let pairs_f = f32(sp.pair_count + 1u);
     let per_sweep = pairs_f + f32(patches_used) * f32(sp.patch_iters + 1u) + 2.0;
     let sweeps = f32(sp.pos_iters + sp.vel_iters + 1u);
-    let per_substep = sweeps * per_sweep + 2.0 * f32(sp.body_count + 1u) + 1.0;
+    let resamples = 2.0 * (2.0 * pairs_f + f32(patches_used)); // resample_rows, twice
+    let per_substep = sweeps * per_sweep + resamples + 2.0 * f32(sp.body_count + 1u) + 1.0;
     let passes = 2.0 * pairs_f + f32(patches_used) + f32(sp.substeps) * per_substep + f32(sp.body_count) + 2.0;
     let frame = bitcast<u32>(solver_scratch[world].w) + 1u;
     if (sp.loop_budget > 0u && passes > f32(sp.loop_budget)) {
@@ -82,16 +94,21 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
         for (var b = 0u; b < sp.body_count; b++) {
             integrate_velocity(first, b, h);
         }
-        sweep(world, row0, h, true, true, false);
-        // The poses stand still during the sweeps: the first samples each row's SDF, the others reuse it.
+        sweep(world, row0, h, true, true);
+        if (sp.pos_iters > 0u) {
+            resample_rows(world, row0);
+        }
         for (var it = 0u; it < sp.pos_iters; it++) {
-            sweep(world, row0, h, true, false, it == 0u);
+            sweep(world, row0, h, true, false);
         }
         for (var b = 0u; b < sp.body_count; b++) {
             integrate_position(first, b, h);
         }
+        if (sp.vel_iters > 0u) {
+            resample_rows(world, row0);
+        }
         for (var it = 0u; it < sp.vel_iters; it++) {
-            sweep(world, row0, h, false, false, it == 0u);
+            sweep(world, row0, h, false, false);
         }
     }
     // A world that went non-finite or faster than max_speed is flagged for the caller to reset.

@@ -200,6 +200,47 @@ struct PairCtx {
     db: Dyn,
 }
 
+// Samples pair's SDF at the contact point x (world) of row ri, shape b posed by vb, and stores the row's
+// normal (world, out of b) and separation [m] in its scratch; zero where the SDF has no gradient.
+// Returns what it stored. The caller has bound the pair's SDF (sdf_bind).
+fn resample_row(pair: Pair, vb: BodyView, x: vec3<f32>, ri: u32) -> vec4<f32> {
+    let shape_b = xf_mul(Transform(vec4<f32>(vb.pos, 0.0), vb.rot), Transform(pair.b_pos, pair.b_rot));
+    let s0 = sdf_sample(pair, xf_point(xf_inv(shape_b), x));
+    let glen = length(s0.g);
+    var ns = vec4<f32>(0.0);
+    if (glen > 0.0) {
+        ns = vec4<f32>(quat_rotate(shape_b.q, s0.g / glen), s0.d - pair.radius - sp.rest_offset);
+    }
+    solver_scratch[ri + 2u] = ns;
+    return ns;
+}
+
+// resample_row for every row of pair p's `count` patches from row `first`, at the poses of world `world`:
+// what a sweep with `resample` does before it solves, without the solve.
+fn resample_pair(world: u32, p: u32, first: u32, count: u32) {
+    if (count == 0u) {
+        return;
+    }
+    let pair = pairs[p];
+    sdf_bind(pair);
+    let va = view(world, pair.body_a);
+    let vb = view(world, pair.body_b);
+    for (var i = 0u; i < count; i++) {
+        let g0 = first + i * 4u * ROW;
+        resample_slot(pair, va, vb, g0);
+        resample_slot(pair, va, vb, g0 + ROW);
+        resample_slot(pair, va, vb, g0 + 2u * ROW);
+        resample_slot(pair, va, vb, g0 + 3u * ROW);
+    }
+}
+
+fn resample_slot(pair: Pair, va: BodyView, vb: BodyView, ri: u32) {
+    let anchor = solver_scratch[ri];
+    if (bitcast<u32>(anchor.w) != NONE) {
+        _ = resample_row(pair, vb, va.pos + quat_rotate(va.rot, anchor.xyz), ri);
+    }
+}
+
 // One Gauss-Seidel update of row ri (of the patch at g0) of pair c on the velocities vla, vlb.
 fn solve_row(c: PairCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, g0: u32, ri: u32, h: f32, bias: bool, resample: bool) {
     let anchor = solver_scratch[ri];
@@ -211,27 +252,17 @@ fn solve_row(c: PairCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, g0: u
     let va = c.va;
     let vb = c.vb;
     let x = va.pos + quat_rotate(va.rot, anchor.xyz);
-    var n: vec3<f32>;
-    var s: f32;
+    var ns: vec4<f32>;
     if (resample) {
-        let shape_b = xf_mul(Transform(vec4<f32>(vb.pos, 0.0), vb.rot), Transform(pair.b_pos, pair.b_rot));
-        let s0 = sdf_sample(pair, xf_point(xf_inv(shape_b), x));
-        let glen = length(s0.g);
-        if (glen <= 0.0) {
-            solver_scratch[ri + 2u] = vec4<f32>(0.0);
-            return;
-        }
-        n = quat_rotate(shape_b.q, s0.g / glen);
-        s = s0.d - pair.radius - sp.rest_offset;
-        solver_scratch[ri + 2u] = vec4<f32>(n, s);
+        ns = resample_row(pair, vb, x, ri);
     } else {
-        let ns = solver_scratch[ri + 2u];
-        if (all(ns.xyz == vec3<f32>(0.0))) {
-            return;
-        }
-        n = ns.xyz;
-        s = ns.w;
+        ns = solver_scratch[ri + 2u];
     }
+    if (all(ns.xyz == vec3<f32>(0.0))) {
+        return; // no gradient at the contact
+    }
+    let n = ns.xyz;
+    let s = ns.w;
     let xa = x - pair.radius * n;
     let ra = xa - (va.pos + quat_rotate(va.rot, va.com));
     let rb = xa - (vb.pos + quat_rotate(vb.rot, vb.com));
