@@ -85,11 +85,11 @@ impl ContactConfig {
 
     /// Worst-case loop back edges of one `reduce_batch` (common.wgsl) per invocation: Assign (the portable
     /// one's, unrolled by 4 in reduce_plain.wgsl; the subgroup one takes 8 patches per pass), at most one
-    /// new-patch round per candidate plus the last, each with the eviction's strided arg-min, slot 0's
-    /// strided write and slot rounds 1-3 (written out) with their strided writes.
+    /// new-patch round per candidate plus the last of each of the two round loops, each with the eviction's
+    /// strided arg-min, slot 0's strided write and slot rounds 1-3 (written out) with their strided writes.
     fn reduce_batch_loops(&self) -> u32 {
         let assign = self.max_patches.div_ceil(4) + 1;
-        let rounds = (self.workgroup_size + 1) * (1 + self.strided(self.max_patches + 1));
+        let rounds = (self.workgroup_size + 2) * (1 + self.strided(self.max_patches + 1));
         let slots = self.strided(self.max_patches) + 3 * self.strided(self.max_patches);
         assign + rounds + slots
     }
