@@ -303,9 +303,10 @@ fn evict(lid: u32, offset: f32, mine: ptr<function, u32>) {
 // before the batch (workgroup-uniform; the caller keeps it) and the count after it is returned. Every
 // invocation must call it, after put_candidate. The caller must barrier before reading the patch list.
 //
-// Barriers cost on lavapipe (it runs a workgroup as WG/8 8-wide coroutines, resumed once per barrier
-// region) and they serialise warps on a GPU, so each step is placed to need as few as possible (a batch
-// that opens no patch costs 8, it cost 12 before):
+// Barriers serialise warps on a GPU, so each step is placed to need as few as possible (a batch that opens
+// no patch costs 8, it cost 12 before). On lavapipe they cost next to nothing (measured 2026-12-02: what
+// costs there is every memory instruction, run lane by lane, and every branch's body, run masked whether
+// taken or not; see docs/BENCHMARKS.md):
 // - no barrier at entry: Assign reads only this invocation's candidate and the patch normals, which the
 //   previous batch last wrote before a barrier; candidates of other invocations are read only after the
 //   first round's workgroupUniformLoad; the points are double-buffered, so none at exit either;
@@ -319,7 +320,8 @@ fn evict(lid: u32, offset: f32, mine: ptr<function, u32>) {
 //   ends every read of it from round i-1, so a round costs one workgroupUniformLoad (2 barriers), plus 3
 //   when the budget is full and a victim must be chosen (one atomic arg-min over the patches, `evict`);
 // - each of slot rounds 1-3 initialises the next round's keys in the region that writes its slots (2
-//   barriers per round), and a batch whose invocations have no candidate skips the slot rounds.
+//   barriers per round), and a batch whose invocations have no candidate skips the slot rounds (on a GPU;
+//   lavapipe runs them masked).
 fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) -> u32 {
     let cb = (red_batch & 1u) * WG;
     red_batch += 1u;
