@@ -146,12 +146,22 @@ var<workgroup> wg_victim: atomic<u32>; // eviction arg-min key, NONE between evi
 var<private> red_batch: u32;
 var<private> red_round: u32;
 
+// Record of patch p: entry 0 its normal (pd_normal), entries 1-4 its slots (pd_slot); area and slot-0 key
+// in patch_ak (ak_area, ak_key0).
 fn pd_normal(p: u32) -> u32 {
     return p * 5u;
 }
 
 fn pd_slot(p: u32, k: u32) -> u32 {
     return p * 5u + 1u + k;
+}
+
+fn ak_area(p: u32) -> u32 {
+    return 2u * p;
+}
+
+fn ak_key0(p: u32) -> u32 {
+    return 2u * p + 1u;
 }
 
 // Stores this invocation's candidate of the next batch (EMPTY depth: none).
@@ -163,8 +173,8 @@ fn put_candidate(lid: u32, pd: vec4<f32>, n: vec4<f32>) {
 fn reset_patches(lid: u32) {
     lanes_init();
     for (var p = lid; p < PATCH_CAP; p += WG) {
-        atomicStore(&patch_ak[2u * p], 0u);
-        atomicStore(&patch_ak[2u * p + 1u], 0u);
+        atomicStore(&patch_ak[ak_area(p)], 0u);
+        atomicStore(&patch_ak[ak_key0(p)], 0u);
         for (var s = 0u; s < 4u; s++) {
             patch_data[pd_slot(p, s)] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
         }
@@ -215,7 +225,7 @@ fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32, band: f32
 }
 
 fn measure(p: u32, offset: f32) -> f32 {
-    return f32(atomicLoad(&patch_ak[2u * p])) * (offset - patch_data[pd_slot(p, 0u)].w);
+    return f32(atomicLoad(&patch_ak[ak_area(p)])) * (offset - patch_data[pd_slot(p, 0u)].w);
 }
 
 // Key that a valid candidate already binned by Assign posts to wg_best in the first round: below every
@@ -223,19 +233,26 @@ fn measure(p: u32, offset: f32) -> f32 {
 // workgroup that the batch has members and needs the slot rounds.
 const ASSIGNED_ONLY: u32 = 0x200u;
 
-// FindDeepest of one round of reduce_batch: every unbinned candidate posts its key (in round 0 a binned
-// one posts ASSIGNED_ONLY), and the workgroup reads the largest (a barrier). Zeroes the next round's buffer.
-fn find_deepest(lid: u32, mine: u32, my_key0: u32, round: u32) -> u32 {
+// FindDeepest of round *round of reduce_batch: every unbinned candidate posts its key (in round 0 a binned
+// one posts ASSIGNED_ONLY), and the workgroup reads the largest (a barrier). Zeroes the next round's buffer,
+// counts the round, and after round 0 sets *any_member (the batch has a candidate at all).
+fn find_deepest(lid: u32, mine: u32, my_key0: u32, round: ptr<function, u32>, any_member: ptr<function, bool>) -> u32 {
     let b = red_round & 1u;
     red_round += 1u;
-    let post = combine_max(select(select(0u, ASSIGNED_ONLY, round == 0u && mine != NONE), my_key0, mine == UNASSIGNED));
+    let first = *round == 0u;
+    let post = combine_max(select(select(0u, ASSIGNED_ONLY, first && mine != NONE), my_key0, mine == UNASSIGNED));
     if (post != 0u) {
         atomicMax(&wg_best[b], post);
     }
     if (lid == 0u) {
         atomicStore(&wg_best[b ^ 1u], 0u);
     }
-    return workgroupUniformLoad(&wg_best[b]);
+    let best = workgroupUniformLoad(&wg_best[b]);
+    if (first) {
+        *any_member = best != 0u;
+    }
+    *round += 1u;
+    return best;
 }
 
 // AddPatch and BinReduce: opens patch idx seeded by the candidate of key `best` and bins this invocation's
@@ -246,7 +263,7 @@ fn add_patch(lid: u32, best: u32, idx: u32, cb: u32, my_n: vec3<f32>, units: u32
     if (lid < 5u) {
         // Lane 0 the normal, lane 1 slot 0 (the seed), lanes 2-4 empty slots 1-3.
         var v = select(vec4<f32>(0.0, 0.0, 0.0, EMPTY), cand_pd[cb + seed], lid == 1u);
-        patch_data[idx * 5u + lid] = select(v, vec4<f32>(seed_n, 0.0), lid == 0u);
+        patch_data[pd_normal(idx) + lid] = select(v, vec4<f32>(seed_n, 0.0), lid == 0u);
     }
     let joins = *mine == UNASSIGNED && dot(my_n, seed_n) >= normal_cos;
     if (joins) {
@@ -255,8 +272,8 @@ fn add_patch(lid: u32, best: u32, idx: u32, cb: u32, my_n: vec3<f32>, units: u32
     let add = combine_add(select(0u, units, joins));
     let key = combine_max(select(0u, my_key0, joins));
     if (add != 0u) {
-        atomicAdd(&patch_ak[2u * idx], add);
-        atomicMax(&patch_ak[2u * idx + 1u], key);
+        atomicAdd(&patch_ak[ak_area(idx)], add);
+        atomicMax(&patch_ak[ak_key0(idx)], key);
     }
 }
 
@@ -280,13 +297,13 @@ fn evict(lid: u32, offset: f32, mine: ptr<function, u32>) {
     // the next reads of the patch list follow the next round's barrier. The victim's own members' slot-0
     // keys go with it (they are no longer members).
     if (victim != NONE && lid < 5u) {
-        patch_data[victim * 5u + lid] = patch_data[MAX_PATCHES * 5u + lid];
+        patch_data[pd_normal(victim) + lid] = patch_data[pd_normal(MAX_PATCHES) + lid];
     }
     if (lid == 5u || lid == 6u) {
         let a = lid - 5u;
-        let v = atomicExchange(&patch_ak[2u * MAX_PATCHES + a], 0u);
+        let v = atomicExchange(&patch_ak[ak_area(MAX_PATCHES) + a], 0u);
         if (victim != NONE) {
-            atomicStore(&patch_ak[2u * victim + a], v);
+            atomicStore(&patch_ak[ak_area(victim) + a], v);
         }
     }
     if (lid == 7u) {
@@ -335,8 +352,8 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
     if (my.w < VALID_BELOW) {
         mine = found;
         if (mine != UNASSIGNED) {
-            atomicAdd(&patch_ak[2u * mine], units);
-            atomicMax(&patch_ak[2u * mine + 1u], my_key0);
+            atomicAdd(&patch_ak[ak_area(mine)], units);
+            atomicMax(&patch_ak[ak_key0(mine)], my_key0);
         }
     }
     // New patches: FindDeepest, BinReduce, AddPatch until every candidate is binned. `mine` is this
@@ -352,9 +369,7 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
         if (pc >= MAX_PATCHES) {
             break;
         }
-        best = find_deepest(lid, mine, my_key0, round);
-        any_member = any_member || (round == 0u && best != 0u);
-        round += 1u;
+        best = find_deepest(lid, mine, my_key0, &round, &any_member);
         if (best <= IDX_MASK) {
             break;
         }
@@ -365,9 +380,7 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
     // one of least measure goes. (`best` above IDX_MASK here: the loop above stopped for the budget.)
     if (round == 0u || best > IDX_MASK) {
         loop {
-            best = find_deepest(lid, mine, my_key0, round);
-            any_member = any_member || (round == 0u && best != 0u);
-            round += 1u;
+            best = find_deepest(lid, mine, my_key0, &round, &any_member);
             if (best <= IDX_MASK) {
                 break;
             }
@@ -384,7 +397,7 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
     let band = DEPTH_BAND * offset;
     for (var p = lid; p < pc; p += WG) {
         // Reset for the next batch's posts, which follow this batch's barriers.
-        let key = max(atomicExchange(&patch_ak[2u * p + 1u], 0u), slot_key(0u, p, min_sep, band));
+        let key = max(atomicExchange(&patch_ak[ak_key0(p)], 0u), slot_key(0u, p, min_sep, band));
         let code = key & IDX_MASK;
         if (code != 0u) {
             patch_data[pd_slot(p, 0u)] = cand_pd[cb + code - 1u];

@@ -130,7 +130,7 @@ fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: T
     // Write this job's patches in world coordinates.
     for (var p = lid; p < pc; p += WG) {
         var o: PatchOut;
-        o.normal = vec4<f32>(quat_rotate(world_b.q, patch_data[pd_normal(p)].xyz), f32(atomicLoad(&patch_ak[2u * p])) * pair.area_unit);
+        o.normal = vec4<f32>(quat_rotate(world_b.q, patch_data[pd_normal(p)].xyz), f32(atomicLoad(&patch_ak[ak_area(p)])) * pair.area_unit);
         for (var s = 0u; s < 4u; s++) {
             let sl = patch_data[pd_slot(p, s)];
             if (sl.w < VALID_BELOW) {

@@ -57,7 +57,7 @@ fn merge_jobs(lid: u32, pair: Pair, job_base: u32, job_count: u32, out_base: u32
     workgroupBarrier(); // the last batch's slot writes
     for (var p = lid; p < pc; p += WG) {
         var o: PatchOut;
-        o.normal = vec4<f32>(patch_data[pd_normal(p)].xyz, f32(atomicLoad(&patch_ak[2u * p])) * pair.area_unit);
+        o.normal = vec4<f32>(patch_data[pd_normal(p)].xyz, f32(atomicLoad(&patch_ak[ak_area(p)])) * pair.area_unit);
         for (var s = 0u; s < 4u; s++) {
             o.slots[s] = patch_data[pd_slot(p, s)];
         }

@@ -21,13 +21,12 @@ struct CrowdParams {
 
 // Per-dispatch parameters (a dynamic-offset uniform): the colouring round, or the solver pass's colour
 // and phase.
+// (The phase's warm and resample flags pick the crowd_pass entry point on the host, gpu.rs PHASES.)
 struct PassParams {
     index: u32,
-    // The phase's flags (gpu.rs PHASES); the host picks the crowd_pass entry point by warm and resample,
-    // which the kernels therefore do not read.
-    warm: u32,
     bias: u32,
-    resample: u32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 // Head words of a world's meta block.

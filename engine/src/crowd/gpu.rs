@@ -49,7 +49,8 @@ const A_GENERATE: u64 = 3;
 const A_MERGE: u64 = 6;
 const A_COLOUR: u64 = 9;
 const ARGS_WORDS: u64 = A_COLOUR + 3 * 32;
-/// Solver pass phases (PassParams: warm, bias, resample), one uniform slot per phase and colour.
+/// Solver pass phases [warm, bias, resample]: warm and resample pick the crowd_pass entry point, bias goes to
+/// the phase's uniform slot (PassParams), one slot per phase and colour.
 const PHASES: [[u32; 3]; 5] = [[1, 1, 0], [0, 1, 1], [0, 1, 0], [0, 0, 1], [0, 0, 0]];
 
 /// GPU mirror of `CrowdParams` in crowd_common.wgsl.
@@ -74,9 +75,8 @@ pub struct CrowdParamsGpu {
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 struct PassParamsGpu {
     index: u32,
-    warm: u32,
     bias: u32,
-    resample: u32,
+    _pad: [u32; 2],
 }
 
 /// Figures of one world's last frame, read back for reports.
@@ -259,11 +259,11 @@ impl CrowdPipeline {
         let pass_stride = (limits.min_uniform_buffer_offset_alignment as u64).max(16);
         let mut passes = Vec::new();
         for r in 0..cfg.colour_rounds {
-            passes.push(PassParamsGpu { index: r, warm: 0, bias: 0, resample: 0 });
+            passes.push(PassParamsGpu { index: r, bias: 0, _pad: [0; 2] });
         }
-        for [warm, bias, resample] in PHASES {
+        for [_, bias, _] in PHASES {
             for c in 0..32 {
-                passes.push(PassParamsGpu { index: c, warm, bias, resample });
+                passes.push(PassParamsGpu { index: c, bias, _pad: [0; 2] });
             }
         }
         let mut pass_bytes = vec![0u8; passes.len() * pass_stride as usize];
