@@ -314,3 +314,37 @@ fn assert_patch_sets_match(gp: &[factory_engine::contact::Patch], cp: &[factory_
     // A rare near-tie flip is allowed; systematic disagreement fails.
     assert!(mismatched * 10 <= gp.len(), "{what}: {mismatched} of {} patches differ", gp.len());
 }
+
+/// The generate pass leaves out the reduction's eviction rounds and lists the jobs whose patch budget
+/// overflows; the retry pass redoes those with eviction. On the soup at a budget of 16 every job overflows
+/// and the patches still match the CPU twin (one pass with eviction); at 256 no job overflows and none is
+/// listed (the frame dispatches no retry workgroup).
+#[test]
+fn jobs_that_overflow_their_patch_budget_are_redone_with_eviction() {
+    let g = gpu();
+    let r = 0.05;
+    let grid = Arc::new(sphere_grid(r, 48));
+    let model = soup_vs_grid(shell_soup(3000, r, 0x9E3779B97F4A7C15), grid);
+    let worlds = 3;
+    let poses = turned_poses(worlds);
+    for (max_patches, overflowing) in [(16, 3 * worlds), (256, 0)] {
+        let cfg = ContactConfig { max_patches, chunk_triangles: 1024, ..Default::default() };
+        let pipe = ContactPipeline::new(g, &model, worlds, &cfg).unwrap();
+        assert_eq!(pipe.flat.jobs.len(), 3, "{cfg:?}");
+        pipe.write_body_q(g, &poses);
+        pipe.run(g);
+        let listed = g.read_buffer::<u32>(&pipe.retry_jobs)[0];
+        assert_eq!(listed, overflowing, "max_patches {max_patches}: jobs listed for the retry pass");
+        let (gpu, cpu) = (pipe.read(g), pipe.contacts_cpu(&poses));
+        for w in 0..worlds as usize {
+            let (gc, cc) = (gpu.candidates[w] as i64, cpu.candidates[w] as i64);
+            assert!(gc > 1000 && (gc - cc).abs() <= 2, "world {w}: gpu {gc} cpu {cc}");
+            assert!(
+                gpu.patches[w].len() >= max_patches.min(32) as usize,
+                "world {w}: {} patches",
+                gpu.patches[w].len()
+            );
+            assert_patch_sets_match(&gpu.patches[w], &cpu.patches[w], &format!("max_patches {max_patches}, world {w}"));
+        }
+    }
+}

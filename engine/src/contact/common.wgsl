@@ -125,10 +125,9 @@ fn ordered(f: f32) -> u32 {
     return (b ^ m) & ~IDX_MASK;
 }
 
-// The batch. Points are double-buffered by batch parity (put_candidate), so a batch's last reads of them
-// (the slot rounds) and the next batch's writes need no barrier between them; normals are last read by
-// AddPatch, before the barriers of the batch's last round.
-var<workgroup> cand_pd: array<vec4<f32>, 2u * WG>;      // point xyz, depth w (EMPTY: no candidate)
+// The batch (put_candidate). Other invocations' entries are last read by AddPatch, before the barriers of
+// the batch's last round, so the next batch may overwrite them at once.
+var<workgroup> cand_pd: array<vec4<f32>, WG>;           // point xyz, depth w (EMPTY: no candidate)
 var<workgroup> cand_n: array<vec4<f32>, WG>;            // unit normal xyz, area units w
 // Patch p: seed normal xyz at patch_data[pd_normal(p)], slot k (point xyz, depth w) at pd_slot(p, k); member
 // area [area units] at patch_ak[2p], slot 0's key (members post during Assign/AddPatch) at patch_ak[2p + 1].
@@ -137,14 +136,18 @@ var<workgroup> cand_n: array<vec4<f32>, WG>;            // unit normal xyz, area
 // copies cost a fifth of lane 0 copying field by field.
 var<workgroup> patch_data: array<vec4<f32>, PATCH_CAP * 5u>;
 var<workgroup> patch_ak: array<atomic<u32>, PATCH_CAP * 2u>;
-var<workgroup> patch_key: array<atomic<u32>, PATCH_CAP>;   // slot rounds 1-3
+// Slot k (1-3) of patch p: the arg-max key of its slot round at slot_keys[key_of(k, p)]; members post and
+// reset them (see reduce_batch), so they are 0 between batches. Rounds 1 and 3 share a buffer: round 2
+// resets round 1's keys before round 3 posts.
+var<workgroup> slot_keys: array<atomic<u32>, PATCH_CAP * 2u>;
 var<workgroup> wg_best: array<atomic<u32>, 2>;  // FindDeepest keys, double-buffered by loop parity
 var<workgroup> wg_victim: atomic<u32>; // eviction arg-min key, NONE between evictions
-// Per invocation (workgroup-uniform): batches reduced so far (the candidate buffer's parity) and FindDeepest
-// rounds so far (wg_best's parity runs on across batches, so a batch's last round leaves the buffer of the
-// next batch's first round zeroed).
-var<private> red_batch: u32;
+// Per invocation (workgroup-uniform): FindDeepest rounds so far (wg_best's parity runs on across batches,
+// so a batch's last round leaves the buffer of the next batch's first round zeroed).
 var<private> red_round: u32;
+// Set by reduce_batch without eviction when the budget is full and candidates are left (generate.wgsl
+// then hands the job to its retry pass, which evicts).
+var<private> red_overflow: bool;
 
 // Record of patch p: entry 0 its normal (pd_normal), entries 1-4 its slots (pd_slot); area and slot-0 key
 // in patch_ak (ak_area, ak_key0).
@@ -164,9 +167,13 @@ fn ak_key0(p: u32) -> u32 {
     return 2u * p + 1u;
 }
 
+fn key_of(k: u32, p: u32) -> u32 {
+    return ((k - 1u) & 1u) * PATCH_CAP + p;
+}
+
 // Stores this invocation's candidate of the next batch (EMPTY depth: none).
 fn put_candidate(lid: u32, pd: vec4<f32>, n: vec4<f32>) {
-    cand_pd[(red_batch & 1u) * WG + lid] = pd;
+    cand_pd[lid] = pd;
     cand_n[lid] = n;
 }
 
@@ -175,6 +182,8 @@ fn reset_patches(lid: u32) {
     for (var p = lid; p < PATCH_CAP; p += WG) {
         atomicStore(&patch_ak[ak_area(p)], 0u);
         atomicStore(&patch_ak[ak_key0(p)], 0u);
+        atomicStore(&slot_keys[key_of(1u, p)], 0u);
+        atomicStore(&slot_keys[key_of(2u, p)], 0u);
         for (var s = 0u; s < 4u; s++) {
             patch_data[pd_slot(p, s)] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
         }
@@ -187,17 +196,14 @@ fn reset_patches(lid: u32) {
     workgroupBarrier();
 }
 
-// Metric that slot k maximises for a contact at x; NEG_INF when not eligible.
+// Metric that slot k maximises for a contact at x, given the patch's slots 0 to k - 1 (s0, s1, s2; those
+// past k - 1 are not read); NEG_INF when not eligible.
 // Slots 1-3 take no contact more than `band` above both the deepest one and the surface (every
 // penetrating contact stays eligible): a patch's normal bin can hold
 // points far from touching (a box face's far corners at a large contact offset), which would spread the
 // patch over contacts that carry no load now (the paper's measure "prioritizes contacts with high
 // penetration depth").
-fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32, band: f32) -> f32 {
-    if (k == 0u) {
-        return -depth;
-    }
-    let s0 = patch_data[pd_slot(p, 0u)];
+fn slot_metric(k: u32, s0: vec4<f32>, s1: vec4<f32>, s2: vec4<f32>, x: vec3<f32>, depth: f32, min_sep: f32, band: f32) -> f32 {
     if (s0.w <= MIN_DEPTH_BAND && depth > max(s0.w, 0.0) + min(band, max(abs(s0.w), MIN_DEPTH_BAND))) {
         return NEG_INF;
     }
@@ -205,7 +211,6 @@ fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32, band: f32
         let d = distance(x, s0.xyz);
         return select(NEG_INF, d, d > min_sep);
     }
-    let s1 = patch_data[pd_slot(p, 1u)];
     if (s1.w >= VALID_BELOW) {
         return NEG_INF;
     }
@@ -214,7 +219,6 @@ fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32, band: f32
         let l = length(cross(x - s0.xyz, dir));
         return select(NEG_INF, l, l > min_sep);
     }
-    let s2 = patch_data[pd_slot(p, 2u)];
     if (s2.w >= VALID_BELOW) {
         return NEG_INF;
     }
@@ -222,6 +226,11 @@ fn slot_metric(k: u32, p: u32, x: vec3<f32>, depth: f32, min_sep: f32, band: f32
     let perp = normalize(r - dot(r, dir) * dir);
     let m = -dot(x - s0.xyz, perp);
     return select(NEG_INF, m, m > min_sep);
+}
+
+// Slot 0's key of contact s (its depth; code 0), 0 for an empty slot.
+fn slot0_key(s: vec4<f32>) -> u32 {
+    return select(0u, ordered(-s.w), s.w < VALID_BELOW);
 }
 
 fn measure(p: u32, offset: f32) -> f32 {
@@ -257,12 +266,12 @@ fn find_deepest(lid: u32, mine: u32, my_key0: u32, round: ptr<function, u32>, an
 
 // AddPatch and BinReduce: opens patch idx seeded by the candidate of key `best` and bins this invocation's
 // candidate into it if unbinned and its normal is similar (every invocation calls it).
-fn add_patch(lid: u32, best: u32, idx: u32, cb: u32, my_n: vec3<f32>, units: u32, my_key0: u32, normal_cos: f32, mine: ptr<function, u32>) {
+fn add_patch(lid: u32, best: u32, idx: u32, my_n: vec3<f32>, units: u32, my_key0: u32, normal_cos: f32, mine: ptr<function, u32>) {
     let seed = (best & IDX_MASK) - 1u;
     let seed_n = cand_n[seed].xyz;
     if (lid < 5u) {
         // Lane 0 the normal, lane 1 slot 0 (the seed), lanes 2-4 empty slots 1-3.
-        var v = select(vec4<f32>(0.0, 0.0, 0.0, EMPTY), cand_pd[cb + seed], lid == 1u);
+        var v = select(vec4<f32>(0.0, 0.0, 0.0, EMPTY), cand_pd[seed], lid == 1u);
         patch_data[pd_normal(idx) + lid] = select(v, vec4<f32>(seed_n, 0.0), lid == 0u);
     }
     let joins = *mine == UNASSIGNED && dot(my_n, seed_n) >= normal_cos;
@@ -324,9 +333,9 @@ fn evict(lid: u32, offset: f32, mine: ptr<function, u32>) {
 // no patch costs 8, it cost 12 before). On lavapipe they cost next to nothing (measured 2026-12-02: what
 // costs there is every memory instruction, run lane by lane, and every branch's body, run masked whether
 // taken or not; see docs/BENCHMARKS.md):
-// - no barrier at entry: Assign reads only this invocation's candidate and the patch normals, which the
-//   previous batch last wrote before a barrier; candidates of other invocations are read only after the
-//   first round's workgroupUniformLoad; the points are double-buffered, so none at exit either;
+// - no barrier at entry: Assign reads only this invocation's candidate and the patch normals and slot 0s,
+//   which the previous batch last wrote before a barrier; candidates of other invocations are read only
+//   after the first round's workgroupUniformLoad;
 // - the seed's normal is read from cand_n (stable during the batch), so binning needs no barrier after
 //   AddPatch writes the patch; a fresh patch index's area and slot-0 key are still 0 from reset_patches
 //   (the temporary patch MAX_PATCHES is zeroed after each use), so members can add to them at once;
@@ -336,14 +345,16 @@ fn evict(lid: u32, offset: f32, mine: ptr<function, u32>) {
 // - wg_best is double-buffered: the buffer of round i+1 is zeroed during round i, before the barrier that
 //   ends every read of it from round i-1, so a round costs one workgroupUniformLoad (2 barriers), plus 3
 //   when the budget is full and a victim must be chosen (one atomic arg-min over the patches, `evict`);
-// - each of slot rounds 1-3 initialises the next round's keys in the region that writes its slots (2
-//   barriers per round), and a batch whose invocations have no candidate skips the slot rounds (on a GPU;
-//   lavapipe runs them masked).
-fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) -> u32 {
-    let cb = (red_batch & 1u) * WG;
-    red_batch += 1u;
+// - the slot rounds are the members' work, each on its own patch (2 barriers per round, one at the end),
+//   and a batch whose invocations have no candidate skips them (on a GPU; lavapipe runs them masked).
+//
+// `evicting`, a constant at every call site (lavapipe and GPU compilers inline the call and drop the other
+// branch): false leaves out the eviction rounds, whose code lavapipe would otherwise run, masked, in every
+// batch (15% of the nut-bolt pair's contact handling, which never fills its budget); such a batch sets
+// red_overflow and stops where a patch would have to go.
+fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32, evicting: bool) -> u32 {
     // Assign: the most similar existing patch above the threshold.
-    let my = cand_pd[cb + lid];
+    let my = cand_pd[lid];
     let my_n = cand_n[lid];
     let units = u32(my_n.w);
     let my_key0 = ordered(-my.w) | (lid + 1u);
@@ -352,100 +363,115 @@ fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32) 
     if (my.w < VALID_BELOW) {
         mine = found;
         if (mine != UNASSIGNED) {
+            // Slot 0's arg-max over its current contact (code 0) and the members (see the slot rounds).
             atomicAdd(&patch_ak[ak_area(mine)], units);
-            atomicMax(&patch_ak[ak_key0(mine)], my_key0);
+            atomicMax(&patch_ak[ak_key0(mine)], max(my_key0, slot0_key(patch_data[pd_slot(mine, 0u)])));
         }
     }
     // New patches: FindDeepest, BinReduce, AddPatch until every candidate is binned. `mine` is this
     // candidate's patch index, UNASSIGNED or NONE; only its own invocation needs it. Two loops: rounds while
-    // the budget has room, then rounds that may evict. lavapipe runs a loop's body, masked, at least once,
-    // and every branch's body, so with the eviction in the one loop every round paid for it (20% of contact
-    // handling on the nut-bolt pair, which never fills its budget); now a batch pays for one masked pass.
+    // the budget has room, then rounds that evict: lavapipe runs a loop's body, masked, at least once, and
+    // every branch's body, so with the eviction in the one loop every round paid for it.
     var pc = pc0;
     var round = 0u;
     var best = 0u;
     var any_member = false;
     loop {
-        if (pc >= MAX_PATCHES) {
-            break;
-        }
         best = find_deepest(lid, mine, my_key0, &round, &any_member);
-        if (best <= IDX_MASK) {
+        if (best <= IDX_MASK || pc >= MAX_PATCHES) {
             break;
         }
-        add_patch(lid, best, pc, cb, my_n.xyz, units, my_key0, normal_cos, &mine);
+        add_patch(lid, best, pc, my_n.xyz, units, my_key0, normal_cos, &mine);
         pc += 1u;
     }
-    // Budget full: each new patch goes to index MAX_PATCHES; of the existing patches and the new one, the
-    // one of least measure goes. (`best` above IDX_MASK here: the loop above stopped for the budget.)
-    if (round == 0u || best > IDX_MASK) {
+    // Budget full and candidates left: each new patch goes to index MAX_PATCHES; of the existing patches
+    // and the new one, the one of least measure goes.
+    if (best > IDX_MASK) {
+        if (!evicting) {
+            red_overflow = true;
+            return pc;
+        }
         loop {
+            add_patch(lid, best, MAX_PATCHES, my_n.xyz, units, my_key0, normal_cos, &mine);
+            evict(lid, offset, &mine);
             best = find_deepest(lid, mine, my_key0, &round, &any_member);
             if (best <= IDX_MASK) {
                 break;
             }
-            add_patch(lid, best, MAX_PATCHES, cb, my_n.xyz, units, my_key0, normal_cos, &mine);
-            evict(lid, offset, &mine);
         }
     }
     if (!any_member) {
         return pc; // no candidate in the batch: the slot rounds would change nothing
     }
     // Slots: the arg-max per patch over the current slot and this batch's members, slot by slot (each
-    // slot's metric depends on the slots before it). The patches written above and every slot-0 post are
-    // visible: the last workgroupUniformLoad of the loop was a barrier.
-    let band = DEPTH_BAND * offset;
-    for (var p = lid; p < pc; p += WG) {
-        // Reset for the next batch's posts, which follow this batch's barriers.
-        let key = max(atomicExchange(&patch_ak[ak_key0(p)], 0u), slot_key(0u, p, min_sep, band));
-        let code = key & IDX_MASK;
-        if (code != 0u) {
-            patch_data[pd_slot(p, 0u)] = cand_pd[cb + code - 1u];
+    // slot's metric depends on the slots before it). Only patches with members can change (the others'
+    // slots were chosen against the same slots before them), so the members do all the work: each posts
+    // the larger of its own key and the current contact's (code 0: keep it), and the winner writes its
+    // point. The patches written above and every slot-0 post are visible: the last workgroupUniformLoad
+    // of the loops was a barrier.
+    let member = mine < MAX_PATCHES;
+    if (member) {
+        let key = atomicLoad(&patch_ak[ak_key0(mine)]);
+        if ((key & IDX_MASK) == lid + 1u) {
+            patch_data[pd_slot(mine, 0u)] = my;
         }
-        atomicStore(&patch_key[p], slot_key(1u, p, min_sep, band));
     }
-    // Written out with a constant k each: lavapipe runs both sides of every branch, so slot_metric and
-    // slot_key with a loop's k paid for every slot's reads.
-    slot_round(1u, lid, mine, my, pc, cb, min_sep, band);
-    slot_round(2u, lid, mine, my, pc, cb, min_sep, band);
-    slot_round(3u, lid, mine, my, pc, cb, min_sep, band);
+    // Written out with a constant k each: lavapipe runs both sides of every branch, so slot_metric with a
+    // loop's k paid for every slot's reads.
+    let band = DEPTH_BAND * offset;
+    slot_round(1u, lid, mine, my, min_sep, band);
+    slot_round(2u, lid, mine, my, min_sep, band);
+    slot_round(3u, lid, mine, my, min_sep, band);
+    workgroupBarrier(); // every member has read slot 3's key
+    if (member) {
+        atomicStore(&slot_keys[key_of(3u, mine)], 0u);
+    }
     return pc;
 }
 
-// Slot round k (1-3) of reduce_batch: members post their metric for slot k, then each patch takes the arg-max.
-fn slot_round(k: u32, lid: u32, mine: u32, my: vec4<f32>, pc: u32, cb: u32, min_sep: f32, band: f32) {
-    workgroupBarrier();
-    if (mine < MAX_PATCHES) {
-        let m = slot_metric(k, mine, my.xyz, my.w, min_sep, band);
-        if (m > NEG_INF) {
-            atomicMax(&patch_key[mine], ordered(m) | (lid + 1u));
+// Slot round k (1-3) of reduce_batch: the members of each patch post their metric for slot k and the
+// current contact's, then the winner writes its point (or, when neither it nor any member is eligible, the
+// slot empties). Also resets the previous slot's key, which every member has read.
+fn slot_round(k: u32, lid: u32, mine: u32, my: vec4<f32>, min_sep: f32, band: f32) {
+    workgroupBarrier(); // slot k - 1 written
+    let member = mine < MAX_PATCHES;
+    if (member) {
+        if (k == 1u) {
+            atomicStore(&patch_ak[ak_key0(mine)], 0u);
+        } else {
+            atomicStore(&slot_keys[key_of(k - 1u, mine)], 0u);
+        }
+        let s0 = patch_data[pd_slot(mine, 0u)];
+        var s1 = vec4<f32>(0.0);
+        var s2 = vec4<f32>(0.0);
+        if (k >= 2u) {
+            s1 = patch_data[pd_slot(mine, 1u)];
+        }
+        if (k >= 3u) {
+            s2 = patch_data[pd_slot(mine, 2u)];
+        }
+        let cur = patch_data[pd_slot(mine, k)];
+        let m = slot_metric(k, s0, s1, s2, my.xyz, my.w, min_sep, band);
+        var key = select(0u, ordered(m) | (lid + 1u), m > NEG_INF);
+        if (cur.w < VALID_BELOW) {
+            let mc = slot_metric(k, s0, s1, s2, cur.xyz, cur.w, min_sep, band);
+            if (mc > NEG_INF) {
+                key = max(key, ordered(mc));
+            }
+        }
+        if (key != 0u) {
+            atomicMax(&slot_keys[key_of(k, mine)], key);
         }
     }
     workgroupBarrier();
-    for (var p = lid; p < pc; p += WG) {
-        let key = atomicLoad(&patch_key[p]);
-        let code = key & IDX_MASK;
-        if (code != 0u) {
-            patch_data[pd_slot(p, k)] = cand_pd[cb + code - 1u];
+    if (member) {
+        let key = atomicLoad(&slot_keys[key_of(k, mine)]);
+        if ((key & IDX_MASK) == lid + 1u) {
+            patch_data[pd_slot(mine, k)] = my;
         } else if (key == 0u) {
             // Neither the current contact (no longer eligible: too close to or far above the new
-            // deepest) nor a candidate qualifies: the slot empties.
-            patch_data[pd_slot(p, k)] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
-        }
-        if (k < 3u) {
-            atomicStore(&patch_key[p], slot_key(k + 1u, p, min_sep, band));
+            // deepest) nor a member qualifies: the slot empties. Every member writes the same value.
+            patch_data[pd_slot(mine, k)] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
         }
     }
-}
-
-// Initial key of slot k of patch p: its current contact's metric, 0 when empty or not eligible.
-fn slot_key(k: u32, p: u32, min_sep: f32, band: f32) -> u32 {
-    let s = patch_data[pd_slot(p, k)];
-    if (s.w < VALID_BELOW) {
-        let m = slot_metric(k, p, s.xyz, s.w, min_sep, band);
-        if (m > NEG_INF) {
-            return ordered(m);
-        }
-    }
-    return 0u;
 }

@@ -111,38 +111,61 @@ pub(crate) fn dispatch_compute(
     pass.dispatch_workgroups(x, y, 1);
 }
 
-/// The generation pipeline.
+/// The generation pipelines: the first pass over every job, without eviction, and the retry pass over the
+/// jobs whose patch budget overflowed (generate.wgsl).
 pub struct GenerateKernel {
     pub pipeline: wgpu::ComputePipeline,
+    pub retry: wgpu::ComputePipeline,
 }
 
 impl GenerateKernel {
     /// `subgroups`: see [`reduce_with_subgroups`].
     pub fn new(device: &wgpu::Device, cfg: &ContactConfig, kinds: SdfKinds, subgroups: bool) -> Self {
+        let source = shader_source_wg(GENERATE_WGSL, cfg.max_patches, cfg.workgroup_size, kinds, subgroups);
         GenerateKernel {
-            pipeline: compute_pipeline(
-                device,
-                "contact-generate",
-                &shader_source_wg(GENERATE_WGSL, cfg.max_patches, cfg.workgroup_size, kinds, subgroups),
-                "generate",
-            ),
+            pipeline: compute_pipeline(device, "contact-generate", &source, "generate"),
+            retry: compute_pipeline(device, "contact-generate-retry", &source, "generate_retry"),
         }
     }
 
-    /// Records one dispatch: `job_count` x `world_count` workgroups.
+    /// Records both passes: `job_count` x `world_count` workgroups, then the retry pass's indirect dispatch
+    /// from `retry_args`. `groups` binds the first pass (group 2 with the retry list and `retry_args`),
+    /// `retry_groups` the retry pass (group 2 with the retry list only: `retry_args` is its dispatch size).
     pub fn dispatch(
         &self,
         pass: &mut wgpu::ComputePass,
         groups: [&wgpu::BindGroup; 3],
+        retry_groups: [&wgpu::BindGroup; 3],
+        retry_args: &wgpu::Buffer,
         job_count: u32,
         world_count: u32,
     ) {
-        pass.set_pipeline(&self.pipeline);
-        for (i, g) in groups.iter().enumerate() {
+        dispatch_compute(pass, &self.pipeline, groups, job_count, world_count);
+        pass.set_pipeline(&self.retry);
+        for (i, g) in retry_groups.iter().enumerate() {
             pass.set_bind_group(i as u32, *g, &[]);
         }
-        pass.dispatch_workgroups(job_count, world_count, 1);
+        pass.dispatch_workgroups_indirect(retry_args, 0);
     }
+}
+
+/// Buffers of generate.wgsl's retry pass for `job_count` jobs in `world_count` worlds: the job list (a
+/// count and a (job, world) pair per job) and the indirect dispatch size; [`clear_retry`] zeroes both's
+/// counters.
+pub(crate) fn retry_buffers(
+    gpu: &crate::gpu::GpuContext,
+    job_count: u32,
+    world_count: u32,
+) -> (wgpu::Buffer, wgpu::Buffer) {
+    let jobs = gpu.storage_buffer_zeroed("retry_jobs", 4 * (1 + 2 * job_count as u64 * world_count as u64));
+    let args = gpu.storage_buffer("retry_args", &[0u32; 3], wgpu::BufferUsages::INDIRECT);
+    (jobs, args)
+}
+
+/// Records the clearing of the retry pass's counters (before each frame's generate pass).
+pub(crate) fn clear_retry(encoder: &mut wgpu::CommandEncoder, retry_jobs: &wgpu::Buffer, retry_args: &wgpu::Buffer) {
+    encoder.clear_buffer(retry_jobs, 0, Some(4));
+    encoder.clear_buffer(retry_args, 0, None);
 }
 
 // --- CPU twin: the same float operations as generate.wgsl, in the same order. ---

@@ -88,10 +88,14 @@ fn minimise_on_triangle(
 // job's patches are written, in world coordinates, to job_patches[out_base..]. Returns (patches,
 // candidates). Called in uniform control flow (it holds the reduction's barriers), after sdf_bind(pair). The
 // caller declares params, tri_verts and job_patches (generate.wgsl; crowd/contacts.wgsl).
-fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: Transform, world_b: Transform, out_base: u32) -> vec2<u32> {
+//
+// `evicting` false (a constant: see reduce_batch): the job stops where its patch budget would overflow and
+// returns (NONE, 0) without writing anything, for a pass with `evicting` to redo.
+fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: Transform, world_b: Transform, out_base: u32, evicting: bool) -> vec2<u32> {
     let b_from_a = xf_mul(xf_inv(world_b), world_a);
     let offset = pair.contact_offset;
     reset_patches(lid);
+    red_overflow = false;
     var pc = 0u;
     var found = 0u;
     for (var base = 0u; base < tri_count; base += WG) {
@@ -124,7 +128,10 @@ fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: T
             }
         }
         put_candidate(lid, cand, normal);
-        pc = reduce_batch(lid, pc, params.normal_cos, offset, pair.min_separation);
+        pc = reduce_batch(lid, pc, params.normal_cos, offset, pair.min_separation, evicting);
+        if (red_overflow) {
+            return vec2<u32>(NONE, 0u);
+        }
     }
     workgroupBarrier(); // the last batch's slot writes
     // Write this job's patches in world coordinates.

@@ -86,12 +86,11 @@ impl ContactConfig {
     /// Worst-case loop back edges of one `reduce_batch` (common.wgsl) per invocation: Assign (the portable
     /// one's, unrolled by 4 in reduce_plain.wgsl; the subgroup one takes 8 patches per pass), at most one
     /// new-patch round per candidate plus the last of each of the two round loops, each with the eviction's
-    /// strided arg-min, slot 0's strided write and slot rounds 1-3 (written out) with their strided writes.
+    /// strided arg-min (the slot rounds have no loops: each member works on its own patch).
     fn reduce_batch_loops(&self) -> u32 {
         let assign = self.max_patches.div_ceil(4) + 1;
         let rounds = (self.workgroup_size + 2) * (1 + self.strided(self.max_patches + 1));
-        let slots = self.strided(self.max_patches) + 3 * self.strided(self.max_patches);
-        assign + rounds + slots
+        assign + rounds
     }
 
     /// Once per workgroup: reset_patches and the output loop, each with a 4-slot loop per patch.
@@ -193,12 +192,13 @@ impl ContactConfig {
         Ok(())
     }
 
-    /// Bytes of workgroup memory the generate and merge kernels declare (common.wgsl): the batch (`cand_pd`
-    /// double-buffered, `cand_n`: 3 x 16 bytes per invocation), the patch list (`patch_data` 5 x 16,
-    /// `patch_ak` 2 x 4, `patch_key` 4 per patch, budget + 1 patches) and `wg_best`, `wg_victim` (12 bytes).
+    /// Bytes of workgroup memory the generate and merge kernels declare (common.wgsl): the batch (`cand_pd`,
+    /// `cand_n`: 2 x 16 bytes per invocation), the patch list (`patch_data` 5 x 16,
+    /// `patch_ak` 2 x 4, `slot_keys` 2 x 4 per patch, budget + 1 patches), `wg_best`, `wg_victim` (12 bytes) and
+    /// generate.wgsl's `wg_retry` (16).
     pub fn workgroup_bytes(&self) -> u32 {
         let cap = self.max_patches + 1;
-        self.workgroup_size * 16 * 3 + cap * (5 * 16 + 2 * 4 + 4) + 12
+        self.workgroup_size * 16 * 2 + cap * (5 * 16 + 2 * 4 + 2 * 4) + 12 + 16
     }
 }
 

@@ -90,6 +90,12 @@ pub struct ContactPipeline {
     normals: NormalsKernel,
     normals_groups: [wgpu::BindGroup; 3],
     gen_groups: [wgpu::BindGroup; 3],
+    /// The retry pass's bind groups (generate.wgsl; automatic layouts belong to one pipeline).
+    retry_groups: [wgpu::BindGroup; 3],
+    /// Jobs whose patch budget overflowed in the first generate pass: a count, then (job, world) per job.
+    pub retry_jobs: wgpu::Buffer,
+    /// The retry pass's indirect dispatch size.
+    retry_args: wgpu::Buffer,
     merge_groups: [wgpu::BindGroup; 3],
 }
 
@@ -196,10 +202,17 @@ impl ContactPipeline {
             gpu.bind_group(pipeline, index, buffers)
         };
         let gp = &generate.pipeline;
+        let (retry_jobs, retry_args) = super::generate::retry_buffers(gpu, job_count, world_count);
         let gen_groups = [
             group(gp, 0, &[&uniform, &pairs, &jobs, &tri_verts, &sdf_values]),
             group(gp, 1, &[&body_q]),
-            group(gp, 2, &[&job_patches, &job_patch_count, &pair_candidates]),
+            group(gp, 2, &[&job_patches, &job_patch_count, &pair_candidates, &retry_jobs, &retry_args]),
+        ];
+        let rp = &generate.retry;
+        let retry_groups = [
+            group(rp, 0, &[&uniform, &pairs, &jobs, &tri_verts, &sdf_values]),
+            group(rp, 1, &[&body_q]),
+            group(rp, 2, &[&job_patches, &job_patch_count, &pair_candidates, &retry_jobs]),
         ];
         let mp = &merge.pipeline;
         let merge_groups = [
@@ -227,6 +240,9 @@ impl ContactPipeline {
             patches,
             patch_counts,
             gen_groups,
+            retry_groups,
+            retry_jobs,
+            retry_args,
             merge_groups,
             contact_normals,
             normals,
@@ -247,9 +263,17 @@ impl ContactPipeline {
     /// Records one frame of contact handling (clear counters, generate, merge) into `encoder`.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
         encoder.clear_buffer(&self.pair_candidates, 0, None);
+        super::generate::clear_retry(encoder, &self.retry_jobs, &self.retry_args);
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("contacts"), timestamp_writes: None });
-        self.generate.dispatch(&mut pass, refs(&self.gen_groups), self.flat.jobs.len() as u32, self.world_count);
+        self.generate.dispatch(
+            &mut pass,
+            refs(&self.gen_groups),
+            refs(&self.retry_groups),
+            &self.retry_args,
+            self.flat.jobs.len() as u32,
+            self.world_count,
+        );
         self.merge.dispatch(&mut pass, refs(&self.merge_groups), self.flat.pairs.len() as u32, self.world_count);
         let pair_count = self.flat.pairs.len() as u32;
         self.normals.dispatch(

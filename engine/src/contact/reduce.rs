@@ -198,7 +198,9 @@ impl Reducer {
                 }
             }
         }
-        // Four arg-max rounds choose the slots.
+        // Four arg-max rounds choose the slots, over every patch. (The kernel works only on the patches with
+        // members in the batch, by the members; the others' slots come out the same here, since they were
+        // chosen against the same slots before them.)
         let band = DEPTH_BAND * offset;
         for k in 0..4 {
             let mut key: Vec<u32> = (0..self.count)

@@ -71,7 +71,7 @@ fn crowd_generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
         return;
     }
     let first = k * cp.chunk;
-    let out = generate_job(lid, pair, pair.tri_first + first, min(cp.chunk, pair.tri_count - first), world_a, world_b, job * MAX_PATCHES);
+    let out = generate_job(lid, pair, pair.tri_first + first, min(cp.chunk, pair.tri_count - first), world_a, world_b, job * MAX_PATCHES, true);
     if (out.y > 0u) {
         atomicAdd(&crowd_meta[m_candidates(w) + e], out.y);
     }
