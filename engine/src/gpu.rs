@@ -260,6 +260,18 @@ impl GpuContext {
         source: &str,
         entry: &str,
     ) -> wgpu::ComputePipeline {
+        self.pipeline_on_with(layout, label, source, entry, &[])
+    }
+
+    /// [`pipeline_on`](Self::pipeline_on) with values for the module's `override` constants.
+    pub fn pipeline_on_with(
+        &self,
+        layout: &ExplicitLayout,
+        label: &str,
+        source: &str,
+        entry: &str,
+        constants: &[(&str, f64)],
+    ) -> wgpu::ComputePipeline {
         let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),
             source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -269,7 +281,7 @@ impl GpuContext {
             layout: Some(&layout.pipeline),
             module: &module,
             entry_point: Some(entry),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
             cache: None,
         })
     }

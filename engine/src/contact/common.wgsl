@@ -125,7 +125,7 @@ fn ordered(f: f32) -> u32 {
     return (b ^ m) & ~IDX_MASK;
 }
 
-// The batch (put_candidate). Other invocations' entries are last read by AddPatch, before the barriers of
+// The batch (stored by reduce_batch). Other invocations' entries are last read by AddPatch, before the barriers of
 // the batch's last round, so the next batch may overwrite them at once.
 var<workgroup> cand_pd: array<vec4<f32>, WG>;           // point xyz, depth w (EMPTY: no candidate)
 var<workgroup> cand_n: array<vec4<f32>, WG>;            // unit normal xyz, area units w
@@ -169,12 +169,6 @@ fn ak_key0(p: u32) -> u32 {
 
 fn key_of(k: u32, p: u32) -> u32 {
     return ((k - 1u) & 1u) * PATCH_CAP + p;
-}
-
-// Stores this invocation's candidate of the next batch (EMPTY depth: none).
-fn put_candidate(lid: u32, pd: vec4<f32>, n: vec4<f32>) {
-    cand_pd[lid] = pd;
-    cand_n[lid] = n;
 }
 
 fn reset_patches(lid: u32) {
@@ -325,9 +319,10 @@ fn evict(lid: u32, offset: f32, mine: ptr<function, u32>) {
     }
 }
 
-// Reduces the batch stored by put_candidate into the workgroup's patch list; `pc0` is the patch count
+// Reduces a batch into the workgroup's patch list: this invocation's candidate is `my` (point xyz, depth w;
+// EMPTY depth: none) with `my_n` (unit normal xyz, area units w); `pc0` is the patch count
 // before the batch (workgroup-uniform; the caller keeps it) and the count after it is returned. Every
-// invocation must call it, after put_candidate. The caller must barrier before reading the patch list.
+// invocation must call it. The caller must barrier before reading the patch list.
 //
 // Barriers serialise warps on a GPU, so each step is placed to need as few as possible (a batch that opens
 // no patch costs 8, it cost 12 before). On lavapipe they cost next to nothing (measured 2026-12-02: what
@@ -352,10 +347,12 @@ fn evict(lid: u32, offset: f32, mine: ptr<function, u32>) {
 // branch): false leaves out the eviction rounds, whose code lavapipe would otherwise run, masked, in every
 // batch (15% of the nut-bolt pair's contact handling, which never fills its budget); such a batch sets
 // red_overflow and stops where a patch would have to go.
-fn reduce_batch(lid: u32, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32, evicting: bool) -> u32 {
+fn reduce_batch(lid: u32, my: vec4<f32>, my_n: vec4<f32>, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32, evicting: bool) -> u32 {
+    // Others read these (AddPatch) only after the first round's barrier; this invocation uses its own from
+    // registers.
+    cand_pd[lid] = my;
+    cand_n[lid] = my_n;
     // Assign: the most similar existing patch above the threshold.
-    let my = cand_pd[lid];
-    let my_n = cand_n[lid];
     let units = u32(my_n.w);
     let my_key0 = ordered(-my.w) | (lid + 1u);
     let found = best_patch(my_n.xyz, pc0, normal_cos); // every invocation: best_patch may use subgroups
@@ -465,13 +462,13 @@ fn slot_round(k: u32, lid: u32, mine: u32, my: vec4<f32>, min_sep: f32, band: f3
     }
     workgroupBarrier();
     if (member) {
+        // The winner writes its point; where neither the current contact (no longer eligible: too close
+        // to or far above the new deepest) nor a member qualifies, the slot empties (every member writes
+        // the same value). One store: lavapipe runs each store instruction lane by lane, taken or not.
         let key = atomicLoad(&slot_keys[key_of(k, mine)]);
-        if ((key & IDX_MASK) == lid + 1u) {
-            patch_data[pd_slot(mine, k)] = my;
-        } else if (key == 0u) {
-            // Neither the current contact (no longer eligible: too close to or far above the new
-            // deepest) nor a member qualifies: the slot empties. Every member writes the same value.
-            patch_data[pd_slot(mine, k)] = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
+        let own = (key & IDX_MASK) == lid + 1u;
+        if (own || key == 0u) {
+            patch_data[pd_slot(mine, k)] = select(vec4<f32>(0.0, 0.0, 0.0, EMPTY), my, own);
         }
     }
 }

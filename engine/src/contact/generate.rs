@@ -82,6 +82,17 @@ pub fn shader_source_wg(
 
 /// Builds a compute pipeline from WGSL with an automatic layout.
 pub(crate) fn compute_pipeline(device: &wgpu::Device, label: &str, source: &str, entry: &str) -> wgpu::ComputePipeline {
+    compute_pipeline_with(device, label, source, entry, &[])
+}
+
+/// [`compute_pipeline`] with values for the module's `override` constants.
+pub(crate) fn compute_pipeline_with(
+    device: &wgpu::Device,
+    label: &str,
+    source: &str,
+    entry: &str,
+    constants: &[(&str, f64)],
+) -> wgpu::ComputePipeline {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(label),
         source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -91,7 +102,7 @@ pub(crate) fn compute_pipeline(device: &wgpu::Device, label: &str, source: &str,
         layout: None,
         module: &module,
         entry_point: Some(entry),
-        compilation_options: Default::default(),
+        compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
         cache: None,
     })
 }

@@ -127,8 +127,7 @@ fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: T
                 }
             }
         }
-        put_candidate(lid, cand, normal);
-        pc = reduce_batch(lid, pc, params.normal_cos, offset, pair.min_separation, evicting);
+        pc = reduce_batch(lid, cand, normal, pc, params.normal_cos, offset, pair.min_separation, evicting);
         if (red_overflow) {
             return vec2<u32>(NONE, 0u);
         }

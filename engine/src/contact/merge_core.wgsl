@@ -51,8 +51,7 @@ fn merge_jobs(lid: u32, pair: Pair, job_base: u32, job_count: u32, out_base: u32
                 normal = vec4<f32>(p.normal.xyz, f32(max(1u, u32(round(units)))));
             }
         }
-        put_candidate(lid, cand, normal);
-        pc = reduce_batch(lid, pc, params.normal_cos, pair.contact_offset, pair.min_separation, true);
+        pc = reduce_batch(lid, cand, normal, pc, params.normal_cos, pair.contact_offset, pair.min_separation, true);
     }
     workgroupBarrier(); // the last batch's slot writes
     for (var p = lid; p < pc; p += WG) {

@@ -9,7 +9,7 @@ use crate::contact::pipeline::to_patches;
 use crate::contact::{ContactConfig, Patch, TransformGpu};
 use crate::error::{EngineError, Result};
 use crate::gpu::{Binding, ExplicitLayout, GpuContext};
-use crate::solver::gpu::{bodies_gpu, solver_params};
+use crate::solver::gpu::{bodies_gpu, solver_constants, solver_params};
 use crate::solver::{BodyModel, BodyState, Control, SolverConfig};
 use bytemuck::{Pod, Zeroable};
 use glam::{Quat, Vec3};
@@ -340,21 +340,18 @@ impl CrowdPipeline {
                 .try_into()
                 .unwrap_or_else(|_| unreachable!());
         let merge = gpu.pipeline_on(&merge_layout, "crowd_merge", &source(MERGE_WGSL), "crowd_merge");
-        let solve: [wgpu::ComputePipeline; 7] = build(
-            &solve_layout,
-            &source(SOLVE_WGSL),
-            &[
-                "crowd_build_rows",
-                "crowd_velocities",
-                "crowd_pass",
-                "crowd_positions",
-                "crowd_finish",
-                "crowd_pass_resample",
-                "crowd_pass_warm",
-            ],
-        )
-        .try_into()
-        .unwrap_or_else(|_| unreachable!());
+        let solve_src = source(SOLVE_WGSL);
+        let constants = solver_constants(solver);
+        let solve: [wgpu::ComputePipeline; 7] = [
+            "crowd_build_rows",
+            "crowd_velocities",
+            "crowd_pass",
+            "crowd_positions",
+            "crowd_finish",
+            "crowd_pass_resample",
+            "crowd_pass_warm",
+        ]
+        .map(|e| gpu.pipeline_on_with(&solve_layout, e, &solve_src, e, &constants));
         let near_groups = vec![
             gpu.bind_explicit(&near_layout, 0, &[&cp_buf, &templates, &rules], 0),
             gpu.bind_explicit(&near_layout, 1, &[&body_q], 0),

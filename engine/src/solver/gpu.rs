@@ -2,7 +2,7 @@
 //! [`super::step_cpu`]; `engine/tests/solver_gpu.rs` checks parity and bitwise determinism.
 
 use super::{BodyModel, BodyState, Control, SolverConfig};
-use crate::contact::generate::{compute_pipeline, shader_source, SdfKinds};
+use crate::contact::generate::{compute_pipeline_with, shader_source, SdfKinds};
 use crate::contact::ContactPipeline;
 use crate::error::{EngineError, Result};
 use crate::gpu::GpuContext;
@@ -38,9 +38,7 @@ pub struct SolverParamsGpu {
     pub gravity: [f32; 4],
     /// Loop passes one invocation may make (0: unlimited; see [`GpuSolver::new`]).
     pub loop_budget: u32,
-    /// 1: [`SolverConfig::friction_per_patch`].
-    pub friction_per_patch: u32,
-    pub _pad: [u32; 2],
+    pub _pad: [u32; 3],
 }
 
 /// GPU mirror of `Body` in solver.wgsl: inverse inertia columns (16-byte aligned), COM + inverse mass,
@@ -128,9 +126,13 @@ pub(crate) fn solver_params(
         patch_iters: cfg.patch_iters,
         gravity: model.gravity.extend(0.0).to_array(),
         loop_budget,
-        friction_per_patch: cfg.friction_per_patch as u32,
-        _pad: [0; 2],
+        _pad: [0; 3],
     }
+}
+
+/// Values of solver_core.wgsl's `override` constants for `cfg`.
+pub(crate) fn solver_constants(cfg: &SolverConfig) -> [(&'static str, f64); 1] {
+    [("FRICTION_PER_PATCH", if cfg.friction_per_patch { 1.0 } else { 0.0 })]
 }
 
 /// The bodies as the kernels read them.
@@ -272,11 +274,12 @@ impl GpuSolver {
             });
         }
         let scratch = gpu.storage_buffer_zeroed("solver_scratch", scratch_bytes);
-        let pipeline = compute_pipeline(
+        let pipeline = compute_pipeline_with(
             dev,
             "solver-step",
             &shader_source(SOLVER_WGSL, contacts.cfg.max_patches, SdfKinds::of(&contacts.flat.pairs)),
             "step",
+            &solver_constants(cfg),
         );
         let group = |index: u32, buffers: &[&wgpu::Buffer]| gpu.bind_group(&pipeline, index, buffers);
         let groups = [

@@ -19,8 +19,7 @@ struct SolverParams {
     gravity: vec4<f32>,
     // Loop passes one invocation may make (llvmpipe's budget, see GpuSolver::new); 0: unlimited.
     loop_budget: u32,
-    // 1: Coulomb's cone on each patch's total normal impulse (SolverConfig::friction_per_patch).
-    friction_per_patch: u32,
+    _pad0: u32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -45,6 +44,11 @@ struct Row {
     normal: vec4<f32>,
     point_b: vec4<f32>,
 }
+
+// Coulomb's cone on each patch's total normal impulse (SolverConfig::friction_per_patch), set when the
+// pipeline is built: lavapipe runs both sides of every branch, so as a uniform flag the per-patch share's
+// 8 storage reads ran, masked, in every row update.
+override FRICTION_PER_PATCH: bool = false;
 
 // vec4s per row in solver_scratch (solver/gpu.rs ROW_VEC4).
 const ROW: u32 = 4u;
@@ -287,7 +291,7 @@ fn solve_row(c: PairCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, g0: u
         let t1 = any_orthonormal(n);
         let t2 = cross(n, t1);
         var limit = mu * lambda.x;
-        if (sp.friction_per_patch != 0u) {
+        if (FRICTION_PER_PATCH) {
             limit = mu * patch_normal_share(g0, ri, lambda.x);
         }
         // Written out (not a loop): lavapipe counts every loop pass against one budget per invocation.
