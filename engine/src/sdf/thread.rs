@@ -185,27 +185,37 @@ impl ThreadSdf {
 }
 
 /// Signed distance and gradient of a hexagonal prism (flat normal +x).
+///
+/// The hexagon is symmetric about both axes and about the line at 30 degrees in the first quadrant, so the
+/// point is folded onto one edge, x = a with |y| <= a / sqrt 3, and the gradient unfolded (a reflection is
+/// its own inverse). Written for the GPU (thread.wgsl, the same operations): one square root and one
+/// division in 2D, where the closest-segment search cost two of each and two more for the sign (lavapipe
+/// runs the head's code, masked, at every thread sample: 13% of the nut-bolt pair's contact handling).
 pub fn hex_prism(h: HexPrism, p: Vec3) -> (f32, Vec3) {
-    // 2D hexagon, folded into the first quadrant (the hexagon is symmetric about both axes).
     let q = Vec2::new(p.x.abs(), p.y.abs());
     let a = h.apothem;
-    let corner = Vec2::new(a, a / SQRT3);
-    let top = Vec2::new(0.0, 2.0 * a / SQRT3);
-    let n1 = Vec2::new(0.5, 0.5 * SQRT3);
-    let c1 = seg_closest(q, Vec2::new(a, 0.0), corner);
-    let c2 = seg_closest(q, corner, top);
-    let inside = q.x <= a && q.dot(n1) <= a;
-    let (c, fallback) =
-        if (q - c1.0).length_squared() <= (q - c2.0).length_squared() { (c1, Vec2::X) } else { (c2, n1) };
-    let (d2, g2q) = signed_from_closest(q, c, inside, fallback);
-    let g2 = Vec2::new(if p.x < 0.0 { -g2q.x } else { g2q.x }, if p.y < 0.0 { -g2q.y } else { g2q.y });
+    // Unit normal of the 30 degree line: points above it are nearer the upper edge.
+    let k = Vec2::new(-0.5, 0.5 * SQRT3);
+    let above = k.dot(q) > 0.0;
+    let r = if above { q - 2.0 * k.dot(q) * k } else { q };
+    let half_edge = a / SQRT3;
+    let dv = Vec2::new(r.x - a, r.y - r.y.clamp(-half_edge, half_edge));
+    // Beside the edge (inside the hexagon always is): its plane's distance and normal; past a corner
+    // (always outside): the distance from the corner.
+    let beside = r.y.abs() <= half_edge;
+    let len = dv.length();
+    let d2 = if beside { dv.x } else { len };
+    let gr = if beside { Vec2::X } else { dv * (1.0 / len) };
+    let gq = if above { gr - 2.0 * k.dot(gr) * k } else { gr };
+    let g2 = Vec2::new(if p.x < 0.0 { -gq.x } else { gq.x }, if p.y < 0.0 { -gq.y } else { gq.y });
     // Extrude along z.
     let zc = 0.5 * (h.z0 + h.z1);
     let dz = (p.z - zc).abs() - 0.5 * (h.z1 - h.z0);
     let sz = if p.z < zc { -1.0 } else { 1.0 };
     if d2 > 0.0 && dz > 0.0 {
         let len = (d2 * d2 + dz * dz).sqrt();
-        (len, Vec3::new(g2.x * d2 / len, g2.y * d2 / len, sz * dz / len))
+        let inv = 1.0 / len;
+        (len, Vec3::new(g2.x * (d2 * inv), g2.y * (d2 * inv), sz * (dz * inv)))
     } else if d2 > dz {
         (d2, Vec3::new(g2.x, g2.y, 0.0))
     } else {
@@ -269,6 +279,60 @@ mod tests {
             let q =
                 Vec3::new(0.0075 * theta.cos(), 0.0075 * theta.sin(), 0.027 + 0.002 * theta / std::f32::consts::TAU);
             assert!((t.sample(q).0 - t.sample(p).0).abs() < 2e-7, "theta {theta}");
+        }
+    }
+
+    /// The folded hexagon against a brute force over its six edges (distance to the nearest edge segment,
+    /// negative inside), on seeded points in and around the head: values within 1e-7 m, unit gradients that
+    /// match central differences.
+    #[test]
+    fn hex_prism_matches_the_distance_to_its_six_edges() {
+        let h = HexPrism { apothem: 0.012, z0: 0.0, z1: 0.01 };
+        let corners: Vec<Vec2> = (0..6)
+            .map(|i| {
+                let t = (30.0 + 60.0 * i as f32).to_radians();
+                Vec2::new(t.cos(), t.sin()) * (2.0 * h.apothem / SQRT3)
+            })
+            .collect();
+        let brute2 = |q: Vec2| {
+            let d = (0..6)
+                .map(|i| (q - seg_closest(q, corners[i], corners[(i + 1) % 6]).0).length())
+                .fold(f32::MAX, f32::min);
+            let inside = (0..6).all(|i| {
+                let n = Vec2::new((60.0 * i as f32).to_radians().cos(), (60.0 * i as f32).to_radians().sin());
+                q.dot(n) <= h.apothem
+            });
+            if inside {
+                -d
+            } else {
+                d
+            }
+        };
+        let mut seed = 0x9E3779B97F4A7C15u64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for _ in 0..2000 {
+            let p = Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.25) * 0.04;
+            let (d, g) = hex_prism(h, p);
+            let d2 = brute2(Vec2::new(p.x, p.y));
+            let dz = (p.z - 0.005).abs() - 0.005;
+            let expect = if d2 > 0.0 && dz > 0.0 { (d2 * d2 + dz * dz).sqrt() } else { d2.max(dz) };
+            assert!((d - expect).abs() < 1e-7, "{p}: {d} vs {expect}");
+            assert!((g.length() - 1.0).abs() < 1e-5, "{p}: {g}");
+            let e = 1e-5;
+            let fd = Vec3::new(
+                hex_prism(h, p + Vec3::X * e).0 - hex_prism(h, p - Vec3::X * e).0,
+                hex_prism(h, p + Vec3::Y * e).0 - hex_prism(h, p - Vec3::Y * e).0,
+                hex_prism(h, p + Vec3::Z * e).0 - hex_prism(h, p - Vec3::Z * e).0,
+            ) / (2.0 * e);
+            // Away from the medial axis the field is smooth and its gradient is the difference quotient's.
+            if fd.length() > 0.999 && fd.length() < 1.001 {
+                assert!(fd.normalize().dot(g) > 0.999, "{p}: {g} vs {fd}");
+            }
         }
     }
 

@@ -84,32 +84,28 @@ fn signed_from_closest(x: vec2<f32>, c: Closest, inside: bool, normal: vec2<f32>
     return Sample2(sgn * len, d * (sgn / len));
 }
 
+// Twin of thread.rs hex_prism, which explains the fold.
 fn hex_prism_sample(apothem: f32, z0: f32, z1: f32, p: vec3<f32>) -> Sample {
     let q = vec2<f32>(abs(p.x), abs(p.y));
     let a = apothem;
-    let corner = vec2<f32>(a, a / SQRT3_T);
-    let top = vec2<f32>(0.0, 2.0 * a / SQRT3_T);
-    let n1 = vec2<f32>(0.5, 0.5 * SQRT3_T);
-    let c1 = seg_closest(q, vec2<f32>(a, 0.0), corner);
-    let c2 = seg_closest(q, corner, top);
-    let inside = q.x <= a && dot(q, n1) <= a;
-    var c = c2;
-    var fallback = n1;
-    let e1 = q - c1.c;
-    let e2 = q - c2.c;
-    if (dot(e1, e1) <= dot(e2, e2)) {
-        c = c1;
-        fallback = vec2<f32>(1.0, 0.0);
-    }
-    let s2 = signed_from_closest(q, c, inside, fallback);
-    let g2 = vec2<f32>(select(s2.g.x, -s2.g.x, p.x < 0.0), select(s2.g.y, -s2.g.y, p.y < 0.0));
+    let k = vec2<f32>(-0.5, 0.5 * SQRT3_T);
+    let above = dot(k, q) > 0.0;
+    let r = select(q, q - 2.0 * dot(k, q) * k, above);
+    let half_edge = a / SQRT3_T;
+    let dv = vec2<f32>(r.x - a, r.y - clamp(r.y, -half_edge, half_edge));
+    let beside = abs(r.y) <= half_edge;
+    let len = length(dv);
+    let d2 = select(len, dv.x, beside);
+    let gr = select(dv * (1.0 / len), vec2<f32>(1.0, 0.0), beside);
+    let gq = select(gr, gr - 2.0 * dot(k, gr) * k, above);
+    let g2 = vec2<f32>(select(gq.x, -gq.x, p.x < 0.0), select(gq.y, -gq.y, p.y < 0.0));
     let zc = 0.5 * (z0 + z1);
     let dz = abs(p.z - zc) - 0.5 * (z1 - z0);
     let sz = select(1.0, -1.0, p.z < zc);
-    let d2 = s2.d;
     if (d2 > 0.0 && dz > 0.0) {
-        let len = sqrt(d2 * d2 + dz * dz);
-        return Sample(len, vec3<f32>(g2.x * d2 / len, g2.y * d2 / len, sz * dz / len));
+        let l3 = sqrt(d2 * d2 + dz * dz);
+        let inv = 1.0 / l3;
+        return Sample(l3, vec3<f32>(g2.x * (d2 * inv), g2.y * (d2 * inv), sz * (dz * inv)));
     } else if (d2 > dz) {
         return Sample(d2, vec3<f32>(g2.x, g2.y, 0.0));
     }
