@@ -308,13 +308,8 @@ mod tests {
                 d
             }
         };
-        let mut seed = 0x9E3779B97F4A7C15u64;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = crate::rng::SplitMix64(0x9E3779B97F4A7C15);
+        let mut rnd = move || rng.unit();
         for _ in 0..2000 {
             let p = Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.25) * 0.04;
             let (d, g) = hex_prism(h, p);
