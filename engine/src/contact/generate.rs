@@ -115,11 +115,16 @@ pub(crate) fn dispatch_compute(
     x: u32,
     y: u32,
 ) {
+    bind_compute(pass, pipeline, groups);
+    pass.dispatch_workgroups(x, y, 1);
+}
+
+/// Sets `pipeline` and its three bind groups for the dispatch that follows.
+fn bind_compute(pass: &mut wgpu::ComputePass, pipeline: &wgpu::ComputePipeline, groups: [&wgpu::BindGroup; 3]) {
     pass.set_pipeline(pipeline);
     for (i, g) in groups.iter().enumerate() {
         pass.set_bind_group(i as u32, *g, &[]);
     }
-    pass.dispatch_workgroups(x, y, 1);
 }
 
 /// The generation pipelines: the first pass over every job, without eviction, and the retry pass over the
@@ -152,10 +157,7 @@ impl GenerateKernel {
         world_count: u32,
     ) {
         dispatch_compute(pass, &self.pipeline, groups, job_count, world_count);
-        pass.set_pipeline(&self.retry);
-        for (i, g) in retry_groups.iter().enumerate() {
-            pass.set_bind_group(i as u32, *g, &[]);
-        }
+        bind_compute(pass, &self.retry, retry_groups);
         pass.dispatch_workgroups_indirect(retry_args, 0);
     }
 }

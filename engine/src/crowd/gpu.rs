@@ -8,7 +8,7 @@ use crate::contact::model::{PairGpu, ParamsGpu, PatchGpu};
 use crate::contact::pipeline::to_patches;
 use crate::contact::{ContactConfig, Patch, TransformGpu};
 use crate::error::{EngineError, Result};
-use crate::gpu::{Binding, ExplicitLayout, GpuContext};
+use crate::gpu::{Binding, GpuContext};
 use crate::solver::gpu::{bodies_gpu, solver_constants, solver_params};
 use crate::solver::{BodyModel, BodyState, Control, SolverConfig};
 use bytemuck::{Pod, Zeroable};
@@ -324,21 +324,13 @@ impl CrowdPipeline {
             "crowd-solve",
             &[&[Binding::Uniform, Binding::Uniform, ro, ro], &[ro, ro, ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
         );
-        let build = |layout: &ExplicitLayout, src: &str, entries: &[&str]| -> Vec<wgpu::ComputePipeline> {
-            entries.iter().map(|e| gpu.pipeline_on(layout, e, src, e)).collect()
-        };
         let near_src = source(NEAR_WGSL);
-        let near: [wgpu::ComputePipeline; 7] = build(
-            &near_layout,
-            &near_src,
-            &["keep_keys", "near_count", "near_scan", "near_emit", "incidence", "colour_round", "colour_sort"],
-        )
-        .try_into()
-        .unwrap_or_else(|_| unreachable!());
+        let near: [wgpu::ComputePipeline; 7] =
+            ["keep_keys", "near_count", "near_scan", "near_emit", "incidence", "colour_round", "colour_sort"]
+                .map(|e| gpu.pipeline_on(&near_layout, e, &near_src, e));
+        let contacts_src = source(CONTACTS_WGSL);
         let contacts: [wgpu::ComputePipeline; 2] =
-            build(&contact_layout, &source(CONTACTS_WGSL), &["crowd_generate", "crowd_alloc"])
-                .try_into()
-                .unwrap_or_else(|_| unreachable!());
+            ["crowd_generate", "crowd_alloc"].map(|e| gpu.pipeline_on(&contact_layout, e, &contacts_src, e));
         let merge = gpu.pipeline_on(&merge_layout, "crowd_merge", &source(MERGE_WGSL), "crowd_merge");
         let solve_src = source(SOLVE_WGSL);
         let constants = solver_constants(solver);
