@@ -325,9 +325,9 @@ fn evict(lid: u32, offset: f32, mine: ptr<function, u32>) {
 // invocation must call it. The caller must barrier before reading the patch list.
 //
 // Barriers serialise warps on a GPU, so each step is placed to need as few as possible (a batch that opens
-// no patch costs 9: 2 for its one FindDeepest round, 2 per slot round and 1 after the last). On lavapipe they cost next to nothing (measured 2026-12-02: what
-// costs there is every memory instruction, run lane by lane, and every branch's body, run masked whether
-// taken or not; see docs/BENCHMARKS.md):
+// no patch costs 9: 2 for its one FindDeepest round, 2 per slot round and 1 after the last). On lavapipe
+// they cost next to nothing (measured 2026-12-02: what costs there is every memory instruction, run lane by
+// lane, and every branch's body, run masked whether taken or not; see docs/BENCHMARKS.md):
 // - no barrier at entry: Assign reads only this invocation's candidate and the patch normals and slot 0s,
 //   which the previous batch last wrote before a barrier; candidates of other invocations are read only
 //   after the first round's workgroupUniformLoad;
