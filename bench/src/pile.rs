@@ -73,6 +73,16 @@ impl PileKind {
         let (substeps, pos_iters) = if self == PileKind::Bowls { (2, 50) } else { (1, 16) };
         SolverConfig { substeps, pos_iters, vel_iters: 1, ..Default::default() }
     }
+
+    /// What a pile of this kind needs to come to rest on our solver (docs/BENCHMARKS.md, "The 1024-nut pile
+    /// at rest"): Table II's position iterations with at least 2 substeps and 4 velocity iterations. At
+    /// Table II's 1 substep and 1 velocity iteration a nut pile keeps creeping (some nut moves millimetres
+    /// per second after 6 s) and the velocities the one velocity sweep leaves jitter at centimetres per
+    /// second in bodies that do not move.
+    pub fn settling_solver(self) -> SolverConfig {
+        let paper = self.paper_solver();
+        SolverConfig { substeps: paper.substeps.max(2), vel_iters: paper.vel_iters.max(4), ..paper }
+    }
 }
 
 /// Which solver steps a pile (see the module doc).
@@ -264,10 +274,18 @@ pub struct PileReport {
     /// ... and that median for each simulated second in turn (the last entry covers what is left) [m/s] ...
     pub median_max_speed_per_second_m_s: Vec<f64>,
     /// ... and the farthest any body's centre of mass moved over the last second (or the whole run if
-    /// shorter) [mm]: a pile at rest jitters in place, it does not creep.
+    /// shorter) [mm]: a pile at rest jitters in place, it does not creep ...
     pub last_second_max_drift_mm: f64,
-    /// Deepest contact at any frame start [mm] (positive: penetration).
+    /// ... which body that was, and where its centre of mass ended [m] (a body sliding off the pile's rim
+    /// and one creeping inside it are different problems).
+    pub last_second_max_drift_body: u32,
+    pub last_second_max_drift_end_m: [f32; 3],
+    /// Bodies of world 0 faster than [`MOVING_SPEED`] at the last frame.
+    pub final_moving_bodies: u32,
+    /// Deepest contact at any frame start [mm] (positive: penetration) ...
     pub max_penetration_mm: f64,
+    /// ... and in each simulated second in turn [mm] (landing frames against a settled pile).
+    pub max_penetration_per_second_mm: Vec<f64>,
     /// Every pose and velocity stayed finite.
     pub finite: bool,
     /// Worlds whose step did not fit lavapipe's loop budget or (coloured solver) the near-pair, colour or
@@ -329,6 +347,8 @@ struct Tally {
     second_before_end: u32,
     /// The fastest body's speed at each frame end [m/s].
     speeds: Vec<f64>,
+    /// The deepest contact at each frame start [m] (+inf: none).
+    depths: Vec<f32>,
 }
 
 impl Tally {
@@ -355,6 +375,7 @@ impl Tally {
             frames,
             second_before_end: frames.saturating_sub((1.0 / run.solver.dt).round() as u32),
             speeds: Vec::new(),
+            depths: Vec::new(),
         }
     }
 
@@ -371,6 +392,7 @@ impl Tally {
         if let Some(d) = deepest {
             self.deepest = self.deepest.min(d);
         }
+        self.depths.push(deepest.unwrap_or(f32::INFINITY));
         self.over |= flagged;
         self.flagged_frames += flagged as u32;
         self.flags_seen |= flags;
@@ -410,7 +432,11 @@ fn report(
 ) -> PileReport {
     let n = t.n;
     let sim = t.frames as f64 * run.solver.dt as f64;
-    let pile_height = coms(scene, &t.last)[..n].iter().map(|c| c.z).fold(0.0f32, f32::max);
+    let end = coms(scene, &t.last);
+    let pile_height = end[..n].iter().map(|c| c.z).fold(0.0f32, f32::max);
+    // The farthest any centre of mass moved over the last second: (body, distance [m]).
+    let drift = arg_max(end.iter().zip(&t.mark).map(|(a, b)| a.distance(*b)));
+    let per_second = (1.0 / run.solver.dt).round().max(1.0) as usize;
     PileReport {
         scene: run.kind.scene_name(),
         bodies: run.bodies,
@@ -441,25 +467,38 @@ fn report(
         free_fall_speed_m_s: (2.0 * scene.g() * t.top).sqrt(),
         energy_bound_speed_m_s: (2.0 * t.released).sqrt(),
         max_energy_gain: t.max_energy / t.e0 - 1.0,
-        last_second_max_drift_mm: coms(scene, &t.last)
-            .iter()
-            .zip(&t.mark)
-            .map(|(a, b)| a.distance(*b))
-            .fold(0.0f32, f32::max) as f64
-            * 1e3,
+        last_second_max_drift_mm: drift.1 as f64 * 1e3,
+        last_second_max_drift_body: (drift.0 % n) as u32,
+        last_second_max_drift_end_m: end[drift.0].to_array(),
+        final_moving_bodies: moving_bodies(&t.last.body_qd[..n]) as u32,
         final_max_speed_m_s: t.speeds.last().copied().unwrap_or(0.0),
         last_second_median_max_speed_m_s: median(&t.speeds[(t.second_before_end as usize).min(t.speeds.len())..]),
-        median_max_speed_per_second_m_s: {
-            let per_second = (1.0 / run.solver.dt).round().max(1.0) as usize;
-            t.speeds.chunks(per_second).map(median).collect()
-        },
+        median_max_speed_per_second_m_s: t.speeds.chunks(per_second).map(median).collect(),
         max_penetration_mm: (-t.deepest as f64 * 1e3).max(0.0),
+        max_penetration_per_second_mm: t
+            .depths
+            .chunks(per_second)
+            .map(|c| (-c.iter().copied().fold(f32::INFINITY, f32::min) as f64 * 1e3).max(0.0))
+            .collect(),
         finite: t.finite,
         over_loop_budget: t.over,
         flagged_frames: t.flagged_frames,
         flags_seen: t.flags_seen,
         adapter: gpu.info.name.clone(),
     }
+}
+
+/// A body faster than this is moving [m/s] (the pile tests' bar for the fastest body at rest).
+pub const MOVING_SPEED: f32 = 0.01;
+
+/// How many of these bodies are faster than [`MOVING_SPEED`].
+fn moving_bodies(body_qd: &[[Vec3; 2]]) -> usize {
+    body_qd.iter().filter(|v| v[0].length() > MOVING_SPEED).count()
+}
+
+/// The index and value of the largest of `v` ((0, 0) when empty or all below 0).
+fn arg_max(v: impl Iterator<Item = f32>) -> (usize, f32) {
+    v.enumerate().fold((0, 0.0), |a, (i, x)| if x > a.1 { (i, x) } else { a })
 }
 
 /// The median of `v` (the upper one of an even count; 0 when empty).
@@ -504,18 +543,26 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
         let near0 = frames[0].pairs.len();
         let flags = frames.iter().fold(0, |a, f| a | f.flags);
         let (s, _) = pipe.read_state(gpu);
-        t.after(scene, s, flags != 0, flags, deepest);
         if run.bodies >= 256 && (f + 1) % 30 == 0 {
-            // Long runs say how far they are (stderr: the report on stdout stays one JSON object).
+            // Long runs say how far they are and where the fastest body is (stderr: the report on stdout
+            // stays one JSON object), so a pile that does not settle shows what keeps moving.
+            let (i, v) = arg_max(s.body_qd[..t.n].iter().map(|v| v[0].length()));
+            let moving = moving_bodies(&s.body_qd[..t.n]);
+            let c = coms(scene, &s)[i];
             eprintln!(
-                "frame {}/{}: {} near pairs, {:.0} ms per frame so far, fastest body {:.4} m/s",
+                "frame {}/{}: {} near pairs, {:.0} ms per frame so far, fastest body {i} {v:.4} m/s \
+                 (w {:.2} rad/s) at ({:.3}, {:.3}, {:.3}) m, {moving} bodies over {MOVING_SPEED} m/s",
                 f + 1,
                 t.frames,
                 near0,
                 t.wall * 1e3 / (f + 1) as f64,
-                t.speeds.last().copied().unwrap_or(0.0)
+                s.body_qd[i][1].length(),
+                c.x,
+                c.y,
+                c.z
             );
         }
+        t.after(scene, s, flags != 0, flags, deepest);
     }
     let stats = pipe.read_stats(gpu);
     let (frame0, patches0) = &pipe.read_patches(gpu)[0];

@@ -32,18 +32,26 @@ struct Run {
 }
 
 fn release_nut(mu: f32, frames: u32, on_gpu: bool, substeps: u32) -> Run {
-    release_nut_with(mu, frames, on_gpu, SolverConfig { substeps, ..Default::default() })
+    let cfg = SolverConfig { substeps, ..Default::default() };
+    release_nut_with(mu, frames, on_gpu, cfg, &ThreadOptions::default(), &ContactConfig::default())
 }
 
-fn release_nut_with(mu: f32, frames: u32, on_gpu: bool, cfg: SolverConfig) -> Run {
-    let nb = nut_bolt(IsoSize::M16, Fit::Tight, &ThreadOptions::default()).unwrap();
+fn release_nut_with(
+    mu: f32,
+    frames: u32,
+    on_gpu: bool,
+    cfg: SolverConfig,
+    thread: &ThreadOptions,
+    contact: &ContactConfig,
+) -> Run {
+    let nb = nut_bolt(IsoSize::M16, Fit::Tight, thread).unwrap();
     let pair = PartPair::nut_bolt(&nb);
     let mut scene = ContactScene::with_thread_sdf(pair, nb.bolt_sdf(), 1.0e-3);
     scene.model.pairs[0].friction = mu;
     let gpu = GpuContext::global().unwrap();
     let p = nb.pitch;
     let lift = lower_until_touch(gpu, &scene, 5.0 * p, 5.0 * p - 0.1e-3, 0.2e-6).unwrap();
-    let pipe = ContactPipeline::new(gpu, &scene.model, 1, &ContactConfig::default()).unwrap();
+    let pipe = ContactPipeline::new(gpu, &scene.model, 1, contact).unwrap();
     let mp = nb.nut.mass_properties;
     let mut model = BodyModel { gravity: Vec3::new(0.0, 0.0, -G), ..Default::default() };
     model.add_dynamic(mp.mass, mp.inertia, mp.com);
@@ -84,27 +92,49 @@ fn release_nut_with(mu: f32, frames: u32, on_gpu: bool, cfg: SolverConfig) -> Ru
 #[test]
 fn frictionless_m16_nut_descends_the_helix_at_the_analytic_rate() {
     for on_gpu in [false, true] {
-        let r = release_nut(0.0, 60, on_gpu, 1);
-        let k = std::f64::consts::TAU / r.pitch;
-        let a = G as f64 * r.mass / (r.mass + r.inertia_axis * k * k);
-        let expect = 0.5 * a * r.seconds * r.seconds;
-        let turns = r.yaw.abs() / std::f64::consts::TAU;
         let who = if on_gpu { "GPU solver" } else { "CPU reference" };
-        eprintln!(
-            "{who}: descent {:.4} mm (analytic {:.4} mm), turns {turns:.4}, descent per turn {:.4} mm (pitch {:.4} mm)",
-            r.descent * 1e3,
-            expect * 1e3,
-            r.descent / turns * 1e3,
-            r.pitch * 1e3
-        );
-        assert!(
-            (r.descent - expect).abs() <= DESCENT_TOL * expect,
-            "{who}: descent {} m vs analytic {expect} m",
-            r.descent
-        );
-        assert!(r.yaw < 0.0, "{who}: a right-hand nut turns clockwise (seen from +z) going down: yaw {}", r.yaw);
-        assert!((r.descent / turns - r.pitch).abs() <= LEAD_TOL * r.pitch, "{who}: {} m per turn", r.descent / turns);
+        assert_analytic_descent(&release_nut(0.0, 60, on_gpu, 1), who);
     }
+}
+
+/// The frictionless descent against a = g m / (m + I (2 pi / p)^2) (DESCENT_TOL) and the lead against the
+/// pitch (LEAD_TOL).
+fn assert_analytic_descent(r: &Run, who: &str) {
+    let k = std::f64::consts::TAU / r.pitch;
+    let a = G as f64 * r.mass / (r.mass + r.inertia_axis * k * k);
+    let expect = 0.5 * a * r.seconds * r.seconds;
+    let turns = r.yaw.abs() / std::f64::consts::TAU;
+    eprintln!(
+        "{who}: descent {:.4} mm (analytic {:.4} mm), turns {turns:.4}, descent per turn {:.4} mm (pitch {:.4} mm)",
+        r.descent * 1e3,
+        expect * 1e3,
+        r.descent / turns * 1e3,
+        r.pitch * 1e3
+    );
+    assert!(
+        (r.descent - expect).abs() <= DESCENT_TOL * expect,
+        "{who}: descent {} m vs analytic {expect} m",
+        r.descent
+    );
+    assert!(r.yaw < 0.0, "{who}: a right-hand nut turns clockwise (seen from +z) going down: yaw {}", r.yaw);
+    assert!((r.descent / turns - r.pitch).abs() <= LEAD_TOL * r.pitch, "{who}: {} m per turn", r.descent / turns);
+}
+
+/// The nut of the speed figures (docs/BENCHMARKS.md, `factory-bench scene nut-bolt --segments-per-turn 48
+/// --descent-iters 4`: "Model only what the scene needs") at the paper's solver settings (1 substep, 20 + 1
+/// iterations), on the GPU: the speed goal holds "with the accuracy above", so this nut must meet
+/// it too. Frictionless it descends at the analytic rate; at the paper's mu 0.05 (above the critical
+/// 0.0375) it stays: its descent after 1 s within LOCKED_DRIFT (measured 2026-12-02: 0.0055 mm; at every
+/// frame it jitters more, inside its axial play, as the fine nut does at 1 substep: see LOCK_SUBSTEPS).
+#[test]
+fn the_benchmarks_coarse_nut_keeps_the_analytic_descent_and_holds_at_the_papers_friction() {
+    let thread = ThreadOptions { segments_per_turn: 48, ..Default::default() };
+    let contact = ContactConfig { iterations: 4, ..Default::default() };
+    let cfg = SolverConfig::default();
+    assert_analytic_descent(&release_nut_with(0.0, 60, true, cfg.clone(), &thread, &contact), "coarse nut");
+    let held = release_nut_with(0.05, 60, true, cfg, &thread, &contact);
+    eprintln!("coarse nut, mu 0.05: descent {:.5} mm", held.descent * 1e3);
+    assert!(held.descent.abs() < LOCKED_DRIFT, "coarse nut, mu 0.05: descent {} m in 1 s", held.descent);
 }
 
 /// Self-locking (DESIGN section 6): the nut holds when mu exceeds about tan(lead angle) cos(30 deg)
