@@ -73,16 +73,6 @@ impl PileKind {
         let (substeps, pos_iters) = if self == PileKind::Bowls { (2, 50) } else { (1, 16) };
         SolverConfig { substeps, pos_iters, vel_iters: 1, ..Default::default() }
     }
-
-    /// What a pile of this kind needs to come to rest on our solver (docs/BENCHMARKS.md, "The 1024-nut pile
-    /// at rest"): Table II's position iterations with at least 2 substeps and 4 velocity iterations. At
-    /// Table II's 1 substep and 1 velocity iteration a nut pile keeps creeping (some nut moves millimetres
-    /// per second after 6 s) and the velocities the one velocity sweep leaves jitter at centimetres per
-    /// second in bodies that do not move.
-    pub fn settling_solver(self) -> SolverConfig {
-        let paper = self.paper_solver();
-        SolverConfig { substeps: paper.substeps.max(2), vel_iters: paper.vel_iters.max(4), ..paper }
-    }
 }
 
 /// Which solver steps a pile (see the module doc).
