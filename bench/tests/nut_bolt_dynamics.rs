@@ -124,8 +124,9 @@ fn assert_analytic_descent(r: &Run, who: &str) {
 /// --descent-iters 4`: "Model only what the scene needs") at the paper's solver settings (1 substep, 20 + 1
 /// iterations), on the GPU: the speed goal holds "with the accuracy above", so this nut must meet
 /// it too. Frictionless it descends at the analytic rate; at the paper's mu 0.05 (above the critical
-/// 0.0375) it stays: its descent after 1 s within LOCKED_DRIFT (measured 2026-12-02: 0.0055 mm; at every
-/// frame it jitters more, inside its axial play, as the fine nut does at 1 substep: see LOCK_SUBSTEPS).
+/// 0.0375) it stays: its descent after 1 s within LOCKED_DRIFT (measured 2026-12-02: 0.0055 mm). Its
+/// excursion at every frame is not asserted: at 1 substep the fine nut jitters by up to 22 um inside its
+/// axial play (see LOCK_SUBSTEPS).
 #[test]
 fn the_benchmarks_coarse_nut_keeps_the_analytic_descent_and_holds_at_the_papers_friction() {
     let thread = ThreadOptions { segments_per_turn: 48, ..Default::default() };
