@@ -324,7 +324,6 @@ struct Tally {
     top: f64,
     released: f64,
     wall: f64,
-    deepest: f32,
     max_speed: f64,
     max_energy: f64,
     finite: bool,
@@ -353,7 +352,6 @@ impl Tally {
             top: start_com[..n].iter().map(|c| c.z).fold(0.0f32, f32::max) as f64,
             released: start_com[..n].iter().map(|c| c.z as f64).sum::<f64>() * scene.g(),
             wall: 0.0,
-            deepest: f32::INFINITY,
             max_speed: 0.0,
             max_energy: e0,
             finite: true,
@@ -379,9 +377,6 @@ impl Tally {
     /// After a frame: its state, whether some world was flagged and not stepped (and why: crowd FLAG_*
     /// bits), and the deepest contact it started from.
     fn after(&mut self, scene: &PileScene, s: BodyState, flagged: bool, flags: u32, deepest: Option<f32>) {
-        if let Some(d) = deepest {
-            self.deepest = self.deepest.min(d);
-        }
         self.depths.push(deepest.unwrap_or(f32::INFINITY));
         self.over |= flagged;
         self.flagged_frames += flagged as u32;
@@ -464,12 +459,8 @@ fn report(
         final_max_speed_m_s: t.speeds.last().copied().unwrap_or(0.0),
         last_second_median_max_speed_m_s: median(&t.speeds[(t.second_before_end as usize).min(t.speeds.len())..]),
         median_max_speed_per_second_m_s: t.speeds.chunks(per_second).map(median).collect(),
-        max_penetration_mm: (-t.deepest as f64 * 1e3).max(0.0),
-        max_penetration_per_second_mm: t
-            .depths
-            .chunks(per_second)
-            .map(|c| (-c.iter().copied().fold(f32::INFINITY, f32::min) as f64 * 1e3).max(0.0))
-            .collect(),
+        max_penetration_mm: penetration_mm(&t.depths),
+        max_penetration_per_second_mm: t.depths.chunks(per_second).map(penetration_mm).collect(),
         finite: t.finite,
         over_loop_budget: t.over,
         flagged_frames: t.flagged_frames,
@@ -489,6 +480,11 @@ fn moving_bodies(body_qd: &[[Vec3; 2]]) -> usize {
 /// The index and value of the largest of `v` ((0, 0) when empty or all below 0).
 fn arg_max(v: impl Iterator<Item = f32>) -> (usize, f32) {
     v.enumerate().fold((0, 0.0), |a, (i, x)| if x > a.1 { (i, x) } else { a })
+}
+
+/// The deepest of these contact depths as a penetration [mm] (0 when none penetrates).
+fn penetration_mm(depths: &[f32]) -> f64 {
+    (-depths.iter().copied().fold(f32::INFINITY, f32::min) as f64 * 1e3).max(0.0)
 }
 
 /// The median of `v` (the upper one of an even count; 0 when empty).
