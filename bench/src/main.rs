@@ -91,6 +91,9 @@ struct SceneArgs {
     /// `serial` (all pairs fixed, one invocation per world; a few dozen bodies on lavapipe).
     #[arg(long, value_enum, default_value = "coloured")]
     pile_solver: PileSolverArg,
+    /// Pile scenes: print the fastest bodies of world 0 for each of the last N frames on stderr.
+    #[arg(long, default_value_t = 0)]
+    trace_frames: u32,
     /// Seed of a pile's starting orientations.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -288,6 +291,7 @@ fn main() -> Result<()> {
                 mu: args.mu.unwrap_or(0.5),
                 contact_offset: args.offset_mm.unwrap_or(10.0) * 1e-3,
                 seed: args.seed,
+                trace_frames: args.trace_frames,
                 pile_solver: match args.pile_solver {
                     PileSolverArg::Coloured => factory_bench::pile::PileSolver::Coloured,
                     PileSolverArg::Serial => factory_bench::pile::PileSolver::Serial,

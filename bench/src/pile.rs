@@ -205,6 +205,10 @@ pub struct PileRun {
     pub contact_offset: f32,
     pub seed: u64,
     pub pile_solver: PileSolver,
+    /// Frames at the end of the run for which the fastest bodies of world 0 are printed on stderr, one
+    /// line per frame (index, speed, velocity, spin, centre of mass): what found a nut orbiting between two
+    /// poses for good (docs/BENCHMARKS.md, 2026-12-03). 0: none.
+    pub trace_frames: u32,
 }
 
 /// What a pile run measured (the columns of the paper's Tables I and II, and the physical checks).
@@ -334,6 +338,8 @@ struct Tally {
     last: BodyState,
     frames: u32,
     second_before_end: u32,
+    /// PileRun::trace_frames.
+    trace_frames: u32,
     /// The fastest body's speed at each frame end [m/s].
     speeds: Vec<f64>,
     /// The deepest contact at each frame start [m] (+inf: none).
@@ -362,6 +368,7 @@ impl Tally {
             last: state.clone(),
             frames,
             second_before_end: frames.saturating_sub((1.0 / run.solver.dt).round() as u32),
+            trace_frames: run.trace_frames,
             speeds: Vec::new(),
             depths: Vec::new(),
         }
@@ -388,8 +395,34 @@ impl Tally {
         self.max_speed = self.max_speed.max(fastest);
         self.speeds.push(fastest);
         self.max_energy = self.max_energy.max(total_energy(scene, &s));
+        if self.speeds.len() as u32 + self.trace_frames > self.frames {
+            eprintln!("trace frame {}: {}", self.speeds.len(), fastest_bodies(scene, &s, self.n, 3));
+        }
         self.last = s;
     }
+}
+
+/// The `count` fastest of world 0's `n` bodies: index, speed [m/s], velocity [m/s], spin [rad/s] and
+/// centre of mass [m] each (PileRun::trace_frames).
+fn fastest_bodies(scene: &PileScene, s: &BodyState, n: usize, count: usize) -> String {
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| s.body_qd[b][0].length().total_cmp(&s.body_qd[a][0].length()));
+    let c = coms(scene, s);
+    let body = |i: usize| {
+        let [v, w] = s.body_qd[i];
+        format!(
+            "{i} {:.4} m/s ({:.4}, {:.4}, {:.4}) spin {:.2} rad/s at ({:.4}, {:.4}, {:.4}) m",
+            v.length(),
+            v.x,
+            v.y,
+            v.z,
+            w.length(),
+            c[i].x,
+            c[i].y,
+            c[i].z
+        )
+    };
+    order.into_iter().take(count).map(body).collect::<Vec<_>>().join(" | ")
 }
 
 fn coms(scene: &PileScene, s: &BodyState) -> Vec<Vec3> {

@@ -84,6 +84,7 @@ fn pile_comes_to_rest_with(kind: PileKind, bodies: u32, pile_solver: PileSolver,
         contact_offset: 0.01,
         seed: 1,
         pile_solver,
+        trace_frames: 0,
     };
     let r = run_pile(GpuContext::global().unwrap(), &run).unwrap();
     eprintln!("{}", serde_json::to_string_pretty(&r).unwrap());
