@@ -565,20 +565,15 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
         if run.bodies >= 256 && (f + 1) % 30 == 0 {
             // Long runs say how far they are and where the fastest body is (stderr: the report on stdout
             // stays one JSON object), so a pile that does not settle shows what keeps moving.
-            let (i, v) = arg_max(s.body_qd[..t.n].iter().map(|v| v[0].length()));
             let moving = moving_bodies(&s.body_qd[..t.n]);
-            let c = coms(scene, &s)[i];
             eprintln!(
-                "frame {}/{}: {} near pairs, {:.0} ms per frame so far, fastest body {i} {v:.4} m/s \
-                 (w {:.2} rad/s) at ({:.3}, {:.3}, {:.3}) m, {moving} bodies over {MOVING_SPEED} m/s",
+                "frame {}/{}: {} near pairs, {:.0} ms per frame so far, fastest body {}, {moving} bodies over \
+                 {MOVING_SPEED} m/s",
                 f + 1,
                 t.frames,
                 near0,
                 t.wall * 1e3 / (f + 1) as f64,
-                s.body_qd[i][1].length(),
-                c.x,
-                c.y,
-                c.z
+                fastest_bodies(scene, &s, t.n, 1)
             );
         }
         t.after(scene, s, flags != 0, flags, deepest);
