@@ -94,6 +94,17 @@ struct SceneArgs {
     /// Pile scenes: print the fastest bodies of world 0 for each of the last N frames on stderr.
     #[arg(long, default_value_t = 0)]
     trace_frames: u32,
+    /// Pile scenes (coloured solver): a body that stays within --sleep-distance-mm and --sleep-angle of one
+    /// pose for this many frames falls asleep until a moving body touches it (0: never; PhysX's wake
+    /// counter of 0.4 s is 24 frames at 60 Hz).
+    #[arg(long, default_value_t = 0)]
+    sleep_frames: u32,
+    /// Sleeping: largest displacement of a body's centre of mass from its reference pose [mm].
+    #[arg(long, default_value_t = 1.0)]
+    sleep_distance_mm: f32,
+    /// Sleeping: largest rotation from the reference pose [rad].
+    #[arg(long, default_value_t = 0.1)]
+    sleep_angle: f32,
     /// Seed of a pile's starting orientations.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -292,6 +303,11 @@ fn main() -> Result<()> {
                 contact_offset: args.offset_mm.unwrap_or(10.0) * 1e-3,
                 seed: args.seed,
                 trace_frames: args.trace_frames,
+                sleep: factory_engine::crowd::SleepConfig {
+                    frames: args.sleep_frames,
+                    distance: args.sleep_distance_mm * 1e-3,
+                    angle: args.sleep_angle,
+                },
                 pile_solver: match args.pile_solver {
                     PileSolverArg::Coloured => factory_bench::pile::PileSolver::Coloured,
                     PileSolverArg::Serial => factory_bench::pile::PileSolver::Serial,

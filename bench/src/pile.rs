@@ -29,7 +29,7 @@ use factory_engine::contact::{
     ContactConfig, ContactModel, ContactPipeline, PairSpec, QueryShape, SdfShape, TransformGpu, NO_BODY,
 };
 use factory_engine::crowd::gpu::CrowdPipeline;
-use factory_engine::crowd::{CrowdConfig, CrowdFlat, CrowdModel};
+use factory_engine::crowd::{CrowdConfig, CrowdFlat, CrowdModel, SleepConfig};
 use factory_engine::gpu::GpuContext;
 use factory_engine::mesh::{MassProperties, TriMesh};
 use factory_engine::rng::SplitMix64;
@@ -209,6 +209,8 @@ pub struct PileRun {
     /// line per frame (index, speed, velocity, spin, centre of mass): what found a nut orbiting between two
     /// poses for good (docs/BENCHMARKS.md, 2026-12-03). 0: none.
     pub trace_frames: u32,
+    /// Sleeping of bodies that stay put (coloured solver only; `factory_engine::crowd::SleepConfig`).
+    pub sleep: SleepConfig,
 }
 
 /// What a pile run measured (the columns of the paper's Tables I and II, and the physical checks).
@@ -289,6 +291,21 @@ pub struct PileReport {
     pub flagged_frames: u32,
     /// ... and why (coloured solver: factory_engine::crowd::FLAG_* bits seen).
     pub flags_seen: u32,
+    /// Sleeping (0 frames: off): frames a body must stay within the distance [mm] and angle [rad] of one
+    /// pose to fall asleep ...
+    pub sleep_frames: u32,
+    pub sleep_distance_mm: f64,
+    pub sleep_angle_rad: f64,
+    /// ... and the bodies of world 0 asleep at the last frame, and at the end of each simulated second. A
+    /// sleeping body has zero velocity and does not move: the rest figures above count it as at rest.
+    pub final_asleep_bodies: u32,
+    pub asleep_bodies_per_second: Vec<u32>,
+    /// Whether the sleepers rested where they slept: after the run every body is woken (the last state
+    /// uploaded again, warm start forgotten) and stepped [`WAKE_FRAMES`] frames (0.25 s); the farthest any
+    /// centre of mass of world 0 then moved [mm] (a sleeper left unsupported would fall g t^2 / 2 = 306 mm)
+    /// and which body (-1: sleeping off).
+    pub woken_max_drift_mm: f64,
+    pub woken_max_drift_body: i64,
     pub adapter: String,
 }
 
@@ -314,6 +331,12 @@ pub fn run_pile(gpu: &GpuContext, run: &PileRun) -> Result<PileReport> {
     ensure!(run.worlds > 0, "--worlds must be at least 1");
     ensure!(run.seconds > 0.0 && run.seconds.is_finite(), "--seconds must be > 0, got {}", run.seconds);
     run.solver.validate()?;
+    ensure!(
+        !(run.sleep.enabled() && run.pile_solver == PileSolver::Serial),
+        "--sleep-frames {}: sleeping is a feature of the coloured pile solver; use --pile-solver coloured or \
+         --sleep-frames 0",
+        run.sleep.frames
+    );
     let scene = pile_scene(run.kind, run.bodies, run.contact_offset, run.mu, run.seed)?;
     match run.pile_solver {
         PileSolver::Coloured => run_coloured(gpu, run, &scene),
@@ -438,6 +461,27 @@ struct LastContacts {
     resting_body_pairs: u64,
     near_pairs: u64,
     colours: u32,
+    /// Bodies of world 0 asleep at the end of each second and at the last frame (empty: sleeping off).
+    asleep_per_second: Vec<u32>,
+    /// [`woken_drift`] (sleeping only): (body, distance [m]).
+    woken: Option<(usize, f32)>,
+}
+
+/// Frames the pile is stepped after waking every body (`PileReport::woken_max_drift_mm`).
+pub const WAKE_FRAMES: u32 = 15;
+
+/// Whether the sleepers were resting where they slept: the last state uploaded again (which wakes every
+/// body and forgets the warm start), stepped [`WAKE_FRAMES`] frames; the farthest any centre of mass of
+/// world 0 moved: (body, distance [m]).
+fn woken_drift(gpu: &GpuContext, pipe: &CrowdPipeline, scene: &PileScene, n: usize) -> (usize, f32) {
+    let (end, _) = pipe.read_state(gpu);
+    pipe.write_state(gpu, &end);
+    for _ in 0..WAKE_FRAMES {
+        pipe.submit_frame(gpu);
+    }
+    let (after, _) = pipe.read_state(gpu);
+    let (a, b) = (coms(scene, &end), coms(scene, &after));
+    arg_max(a[..n].iter().zip(&b[..n]).map(|(x, y)| x.distance(*y)))
 }
 
 fn report(
@@ -498,6 +542,13 @@ fn report(
         over_loop_budget: t.over,
         flagged_frames: t.flagged_frames,
         flags_seen: t.flags_seen,
+        sleep_frames: run.sleep.frames,
+        sleep_distance_mm: run.sleep.distance as f64 * 1e3,
+        sleep_angle_rad: run.sleep.angle as f64,
+        final_asleep_bodies: c.asleep_per_second.last().copied().unwrap_or(0),
+        asleep_bodies_per_second: c.asleep_per_second,
+        woken_max_drift_mm: c.woken.map_or(0.0, |w| w.1 as f64 * 1e3),
+        woken_max_drift_body: c.woken.map_or(-1, |w| w.0 as i64),
         adapter: gpu.info.name.clone(),
     }
 }
@@ -536,7 +587,7 @@ fn start_state(scene: &PileScene, run: &PileRun) -> BodyState {
 
 /// The coloured solver (`factory_engine::crowd`).
 fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<PileReport> {
-    let cfg = CrowdConfig::for_bodies(run.bodies);
+    let cfg = CrowdConfig { sleep: run.sleep, ..CrowdConfig::for_bodies(run.bodies) };
     let pipe = CrowdPipeline::new(gpu, &scene.crowd, &scene.bodies, run.worlds, &cfg, &run.contact, &run.solver)?;
     let state = start_state(scene, run);
     let mut t = Tally::new(scene, run, &state);
@@ -546,6 +597,15 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
     gpu.wait();
     pipe.write_state(gpu, &state);
     let mut colours = 0;
+    let per_second = (1.0 / run.solver.dt).round().max(1.0) as u32;
+    let mut asleep_per_second = Vec::new();
+    let asleep_now = || -> u32 {
+        if !run.sleep.enabled() {
+            return 0;
+        }
+        let rest = pipe.read_rest(gpu);
+        rest[..run.bodies as usize].iter().filter(|r| r.asleep(&run.sleep)).count() as u32
+    };
     for f in 0..t.frames {
         t.before(scene, f);
         let clock = Instant::now();
@@ -568,18 +628,24 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
             let moving = moving_bodies(&s.body_qd[..t.n]);
             eprintln!(
                 "frame {}/{}: {} near pairs, {:.0} ms per frame so far, fastest body {}, {moving} bodies over \
-                 {MOVING_SPEED} m/s",
+                 {MOVING_SPEED} m/s, {} asleep",
                 f + 1,
                 t.frames,
                 near0,
                 t.wall * 1e3 / (f + 1) as f64,
-                fastest_bodies(scene, &s, t.n, 1)
+                fastest_bodies(scene, &s, t.n, 1),
+                asleep_now()
             );
+        }
+        if run.sleep.enabled() && ((f + 1) % per_second == 0 || f + 1 == t.frames) {
+            asleep_per_second.push(asleep_now());
         }
         t.after(scene, s, flags != 0, flags, deepest);
     }
     let stats = pipe.read_stats(gpu);
     let (frame0, patches0) = &pipe.read_patches(gpu)[0];
+    // After the last frame's figures are read: it steps the pile on.
+    let woken = if run.sleep.enabled() { Some(woken_drift(gpu, &pipe, scene, t.n)) } else { None };
     let c = LastContacts {
         candidates: stats.iter().map(|s| s.candidates).sum(),
         contacts: stats.iter().map(|s| s.contacts as u64).sum(),
@@ -593,6 +659,8 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
             .count() as u64,
         near_pairs: stats[0].pairs as u64,
         colours,
+        asleep_per_second,
+        woken,
     };
     let split = crate::scene::time_parts(gpu, t.frames.min(10), &|enc| pipe.encode_handling(enc), &|enc| {
         pipe.encode_solve(enc)
@@ -634,6 +702,8 @@ fn run_serial(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pile
             CrowdFlat::new(&scene.crowd, &run.contact)?.near_pairs(&xf, 0, u32::MAX).0.len() as u64
         },
         colours: 0,
+        asleep_per_second: Vec::new(),
+        woken: None,
     };
     let split = crate::scene::time_split(gpu, &pipe, &solver, t.frames.min(10));
     Ok(report(scene, run, t, last, split, gpu))

@@ -8,8 +8,9 @@
 //! ~17 rad/s, 14 mm in one 1/60 s frame, more than the contact offset sees coming; it penetrates by
 //! 4.4 mm for a frame and is pushed out at the max depenetration velocity (2.8 mm at dt = 1/120 s).
 
-use factory_bench::pile::{run_pile, PileKind, PileRun, PileSolver};
+use factory_bench::pile::{run_pile, PileKind, PileReport, PileRun, PileSolver};
 use factory_engine::contact::ContactConfig;
+use factory_engine::crowd::SleepConfig;
 use factory_engine::gpu::GpuContext;
 use factory_engine::solver::SolverConfig;
 
@@ -67,12 +68,46 @@ fn a_coloured_pile_of_64_nuts_comes_to_rest_at_2_substeps_and_32_iterations() {
     pile_comes_to_rest_with(PileKind::Nuts, 64, PileSolver::Coloured, solver, 6.0);
 }
 
+/// The same 64 nuts at Table II's settings (1 substep, 16 + 1 iterations), where without sleeping they creep
+/// (above), with sleeping on (`factory_engine::crowd::SleepConfig`: a nut that stays within 1 mm and 0.1
+/// rad of one pose for 30 frames sleeps until a moving body touches it). Besides the rest figures, which a
+/// sleeper meets by construction, the test asserts that the sleepers were resting where they slept: woken
+/// all at once after the run and stepped 0.25 s, no nut moves more than WOKEN_DRIFT_MM (one left
+/// unsupported would fall 306 mm).
+#[test]
+fn a_coloured_pile_of_64_nuts_comes_to_rest_at_table_2s_settings_with_sleeping() {
+    /// [mm] in the 0.25 s after every body is woken (a creeping nut moves ~1-7 mm in that time without
+    /// sleeping: 25.5 mm/s at most, docs/BENCHMARKS.md).
+    const WOKEN_DRIFT_MM: f64 = 10.0;
+    let sleep = SleepConfig { frames: 30, distance: 1e-3, angle: 0.1 };
+    let r = run_with(PileKind::Nuts, 64, PileSolver::Coloured, PileKind::Nuts.paper_solver(), 6.0, sleep);
+    assert_rest(&r);
+    assert!(r.final_asleep_bodies > 0, "no nut asleep: the test would not exercise sleeping");
+    assert!(
+        r.woken_max_drift_mm < WOKEN_DRIFT_MM,
+        "woken, nut {} moved {} mm: it slept unsupported",
+        r.woken_max_drift_body,
+        r.woken_max_drift_mm
+    );
+}
+
 fn pile_comes_to_rest(kind: PileKind, bodies: u32, pile_solver: PileSolver) {
     pile_comes_to_rest_with(kind, bodies, pile_solver, kind.paper_solver(), SECONDS);
 }
 
 /// Runs the pile for `seconds` [s] and asserts it is finite, a pile, within the physical bounds and at rest.
 fn pile_comes_to_rest_with(kind: PileKind, bodies: u32, pile_solver: PileSolver, solver: SolverConfig, seconds: f32) {
+    assert_rest(&run_with(kind, bodies, pile_solver, solver, seconds, SleepConfig::OFF));
+}
+
+fn run_with(
+    kind: PileKind,
+    bodies: u32,
+    pile_solver: PileSolver,
+    solver: SolverConfig,
+    seconds: f32,
+    sleep: SleepConfig,
+) -> PileReport {
     let run = PileRun {
         kind,
         bodies,
@@ -85,9 +120,15 @@ fn pile_comes_to_rest_with(kind: PileKind, bodies: u32, pile_solver: PileSolver,
         seed: 1,
         pile_solver,
         trace_frames: 0,
+        sleep,
     };
     let r = run_pile(GpuContext::global().unwrap(), &run).unwrap();
     eprintln!("{}", serde_json::to_string_pretty(&r).unwrap());
+    r
+}
+
+/// Finite, a pile, within the physical bounds and at rest.
+fn assert_rest(r: &PileReport) {
     assert!(r.finite && !r.over_loop_budget, "the world diverged or did not fit the loop budget");
     // A pile, not a layer: the upper parts lie on the lower ones.
     assert!(r.resting_body_pairs >= 2, "{} parts lie on parts", r.resting_body_pairs);

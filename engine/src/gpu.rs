@@ -324,7 +324,13 @@ impl GpuContext {
 
     /// Like [`read_buffer`](Self::read_buffer), but only the first `bytes` bytes (rounded up to 4).
     pub fn read_buffer_prefix<T: Pod>(&self, buffer: &wgpu::Buffer, bytes: u64) -> Vec<T> {
-        let size = bytes.next_multiple_of(4).min(buffer.size());
+        self.read_buffer_range(buffer, 0, bytes)
+    }
+
+    /// Like [`read_buffer`](Self::read_buffer), but only `bytes` bytes (rounded up to 4) from byte `offset`
+    /// (a multiple of 4).
+    pub fn read_buffer_range<T: Pod>(&self, buffer: &wgpu::Buffer, offset: u64, bytes: u64) -> Vec<T> {
+        let size = bytes.next_multiple_of(4).min(buffer.size().saturating_sub(offset));
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size,
@@ -332,7 +338,7 @@ impl GpuContext {
             mapped_at_creation: false,
         });
         let mut enc = self.device.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+        enc.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
         self.queue.submit([enc.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
         staging.map_async(wgpu::MapMode::Read, .., move |r| {

@@ -6,7 +6,7 @@
 use factory_engine::contact::roles::{pair_spec, ShapeDesc, ShapeGeometry};
 use factory_engine::contact::{ContactConfig, PairSpec, TransformGpu, NO_BODY};
 use factory_engine::crowd::gpu::CrowdPipeline;
-use factory_engine::crowd::{colour_pairs, CrowdConfig, CrowdCpu, CrowdFlat, CrowdModel, FLAG_PAIRS};
+use factory_engine::crowd::{colour_pairs, CrowdConfig, CrowdCpu, CrowdFlat, CrowdModel, SleepConfig, FLAG_PAIRS};
 use factory_engine::gpu::GpuContext;
 use factory_engine::rng::SplitMix64;
 use factory_engine::sdf::cache::SdfCache;
@@ -263,20 +263,36 @@ fn coloured_gpu_step_matches_the_cpu_twin() {
 
 #[test]
 fn crowd_frames_are_bitwise_reproducible() {
+    frames_are_bitwise_reproducible(SleepConfig::OFF);
+}
+
+/// The same with sleeping on, loose enough that boxes fall asleep within the 15 frames.
+#[test]
+fn crowd_frames_with_sleeping_bodies_are_bitwise_reproducible() {
+    frames_are_bitwise_reproducible(SleepConfig { frames: 3, distance: 0.002, angle: 0.05 });
+}
+
+fn frames_are_bitwise_reproducible(sleep: SleepConfig) {
     let n = 12;
     let (model, bodies, start) = falling_boxes(n);
-    let cfg = CrowdConfig::for_bodies(n);
+    let cfg = CrowdConfig { sleep, ..CrowdConfig::for_bodies(n) };
     let contact = ContactConfig { max_patches: 16, ..Default::default() };
     let solver = SolverConfig { pos_iters: 16, ..Default::default() };
     let run = || {
         let pipe = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
         pipe.write_state(gpu(), &start);
+        let mut slept = 0;
         for _ in 0..15 {
             pipe.submit_frame(gpu());
+            slept += pipe.read_rest(gpu()).iter().filter(|r| r.asleep(&sleep)).count();
         }
-        pipe.read_state(gpu()).0
+        (pipe.read_state(gpu()).0, slept)
     };
-    let (a, b) = (run(), run());
+    let ((a, slept_a), (b, slept_b)) = (run(), run());
+    assert_eq!(slept_a, slept_b, "the same bodies asleep for the same frames");
+    if sleep.enabled() {
+        assert!(slept_a > 0, "some box fell asleep");
+    }
     let bits = |s: &BodyState| -> Vec<u32> { bytemuck::cast_slice::<TransformGpu, u32>(&s.body_q).to_vec() };
     assert_eq!(bits(&a), bits(&b), "same start, same settings: bitwise the same poses");
     assert!(max_distance(&a, &start) > 0.01, "the boxes moved");
@@ -405,4 +421,121 @@ fn a_broken_crowd_world_is_reset_alone_and_every_world_then_steps_as_if_it_never
     assert_eq!((ok_a, ok_b), (vec![true; 2], vec![true; 2]), "after its reset world 1 is ok");
     let bits = |s: &BodyState| -> Vec<u32> { bytemuck::cast_slice::<TransformGpu, u32>(&s.body_q).to_vec() };
     assert_eq!(bits(&a), bits(&b), "both worlds bitwise as if world 1 never broke");
+}
+
+/// Sleeping (`CrowdConfig::sleep`): the six boxes of the stack's lower layer settle on the table and fall
+/// asleep, alike on the GPU and in the CPU twin; asleep, they keep their poses to the bit with zero velocity;
+/// a kinematic box driven across the table into them wakes the boxes it reaches, which then move, and never
+/// sleeps itself. (The upper layer is left out: at these settings, 1 substep and 16 iterations, its boxes,
+/// each bridging two lower ones, keep rocking at up to 1 rad/s, 0.01-0.06 rad a frame; measured
+/// 2026-12-03 with this test's trace.)
+#[test]
+fn a_settled_stack_falls_asleep_alike_on_the_gpu_and_in_the_twin_and_a_pusher_wakes_it() {
+    /// Frames a box must stay within SLEEP_DISTANCE and SLEEP_ANGLE of one pose to sleep.
+    const SLEEP_FRAMES: u32 = 20;
+    /// [m]: a box resting on the table moves by micrometres; one pushed at PUSH_SPEED by 0.83 mm a frame.
+    const SLEEP_DISTANCE: f32 = 5e-4;
+    const SLEEP_ANGLE: f32 = 0.01;
+    /// The kinematic pusher's speed [m/s] along +x; it starts 38 mm left of the stack and comes within the
+    /// contact offset after about 40 frames, when the stack has slept for about 15.
+    const PUSH_SPEED: f32 = 0.05;
+    const FRAMES: usize = 120;
+    /// Frame by which every box is asleep, before the pusher reaches them.
+    const ASLEEP_BY: usize = 30;
+    const N: usize = 6;
+    let (model, mut bodies) = box_model(N as u32 + 1, 0.5);
+    let pusher = N;
+    bodies.body_inv_mass[pusher] = 0.0;
+    bodies.body_inv_inertia[pusher] = Mat3::ZERO;
+    bodies.body_kinematic = vec![false; N + 1];
+    bodies.body_kinematic[pusher] = true;
+    let (_, _, mut stack) = stacked_boxes();
+    stack.body_q.truncate(N);
+    stack.body_qd.truncate(N);
+    let mut start = stack.clone();
+    start.body_q.push(TransformGpu::new(Vec3::new(-0.12, 0.0, H.z + 0.0005), Quat::IDENTITY));
+    start.body_qd.push([Vec3::new(PUSH_SPEED, 0.0, 0.0), Vec3::ZERO]);
+    let sleep = SleepConfig { frames: SLEEP_FRAMES, distance: SLEEP_DISTANCE, angle: SLEEP_ANGLE };
+    let cfg = CrowdConfig { sleep, ..CrowdConfig::for_bodies(N as u32 + 1) };
+    let contact = ContactConfig { max_patches: 16, ..Default::default() };
+    let solver = SolverConfig { pos_iters: 16, ..Default::default() };
+    let pipe = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
+    let mut cpu = CrowdCpu::new(&model, &bodies, &cfg, &contact, &solver).unwrap();
+    pipe.write_state(gpu(), &start);
+    let mut state = start.clone();
+    let mut last = start.clone();
+    let (mut asleep_at, mut slept_frames, mut woke) = (None, 0usize, Vec::new());
+    for frame in 0..FRAMES {
+        pipe.submit_frame(gpu());
+        let (g, ok) = pipe.read_state(gpu());
+        let c = cpu.step(&mut state, &Control::default());
+        assert!(ok[0] && c[0].1, "frame {frame}: both worlds ok");
+        let rest = pipe.read_rest(gpu());
+        let gpu_asleep: Vec<bool> = rest.iter().map(|r| r.asleep(&sleep)).collect();
+        let cpu_asleep: Vec<bool> = cpu.rest.iter().map(|r| r.asleep(&sleep)).collect();
+        assert_eq!(gpu_asleep, cpu_asleep, "frame {frame}: the same bodies asleep on the GPU and in the twin");
+        assert!(!gpu_asleep[pusher], "frame {frame}: the kinematic pusher never sleeps");
+        let d = max_distance(&g, &state);
+        assert!(d < PARITY_WARM_TOL, "frame {frame}: GPU and CPU twin {d} m apart");
+        for b in 0..N {
+            if gpu_asleep[b] {
+                assert_eq!(g.body_qd[b], [Vec3::ZERO; 2], "frame {frame}: box {b} asleep with a velocity");
+                if rest[b].count > SLEEP_FRAMES as f32 + 1.0 {
+                    // Asleep since last frame at least: not moved by a bit.
+                    let bits = |t: &TransformGpu| bytemuck::cast::<TransformGpu, [u32; 8]>(*t);
+                    assert_eq!(bits(&g.body_q[b]), bits(&last.body_q[b]), "frame {frame}: sleeping box {b} moved");
+                }
+            }
+        }
+        let stack_asleep = gpu_asleep[..N].iter().filter(|&&a| a).count();
+        if stack_asleep == N {
+            asleep_at.get_or_insert(frame);
+            slept_frames += 1;
+        }
+        if asleep_at.is_some() {
+            for b in 0..N {
+                if !gpu_asleep[b] && !woke.contains(&b) {
+                    woke.push(b);
+                }
+            }
+        }
+        // Each side keeps its own rows and sleeping state; the poses are re-synchronised (as above).
+        last = g.clone();
+        state = g;
+    }
+    let moved: Vec<f32> = (0..N)
+        .map(|b| (Vec3::from_slice(&last.body_q[b].p[..3]) - Vec3::from_slice(&stack.body_q[b].p[..3])).length())
+        .collect();
+    println!(
+        "stack asleep from frame {asleep_at:?} for {slept_frames} frames; woken by the pusher: {woke:?}; moved [mm]: {:?}",
+        moved.iter().map(|m| (m * 1e4).round() / 10.0).collect::<Vec<_>>()
+    );
+    let asleep_at = asleep_at.expect("the stack fell asleep");
+    assert!(asleep_at <= ASLEEP_BY, "the stack fell asleep only at frame {asleep_at}");
+    assert!(woke.len() >= 2, "the pusher woke {woke:?}");
+    for &b in &woke {
+        assert!(moved[b] > 0.01, "box {b} woke but moved {} m", moved[b]);
+    }
+}
+
+#[test]
+fn sleep_settings_out_of_range_are_refused_naming_the_field() {
+    let (model, bodies) = box_model(2, 0.5);
+    let contact = ContactConfig::default();
+    let solver = SolverConfig::default();
+    let on = SleepConfig { frames: 30, distance: 0.001, angle: 0.1 };
+    for (sleep, field) in [
+        (SleepConfig { frames: 1, ..on }, "sleep.frames"),
+        (SleepConfig { distance: 0.0, ..on }, "sleep.distance"),
+        (SleepConfig { distance: f32::NAN, ..on }, "sleep.distance"),
+        (SleepConfig { angle: -0.1, ..on }, "sleep.angle"),
+        (SleepConfig { angle: 4.0, ..on }, "sleep.angle"),
+    ] {
+        let cfg = CrowdConfig { sleep, ..CrowdConfig::for_bodies(2) };
+        let err = CrowdCpu::new(&model, &bodies, &cfg, &contact, &solver).err().expect("refused").to_string();
+        assert!(err.contains(field), "{sleep:?}: {err}");
+    }
+    // Off needs no bounds.
+    let cfg = CrowdConfig { sleep: SleepConfig::OFF, ..CrowdConfig::for_bodies(2) };
+    assert!(CrowdCpu::new(&model, &bodies, &cfg, &contact, &solver).is_ok());
 }

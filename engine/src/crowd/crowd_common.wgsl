@@ -15,8 +15,14 @@ struct CrowdParams {
     meta_stride: u32,
     // Patches a world may hold (CrowdConfig::max_patches_per_world).
     patch_budget: u32,
+    // Sleeping (CrowdConfig::sleep; solve.wgsl): frames still before a body sleeps (0: never), the
+    // largest displacement [m] and cos(largest rotation / 2) from the reference pose.
+    sleep_frames: u32,
+    sleep_distance: f32,
+    sleep_half_cos: f32,
     _pad0: u32,
     _pad1: u32,
+    _pad2: u32,
 }
 
 // Per-dispatch parameters (a dynamic-offset uniform): the colouring round, or the solver pass's colour

@@ -2,7 +2,7 @@
 //! per-frame dispatches. The CPU twin is [`super::CrowdCpu`]; `engine/tests/crowd.rs` checks parity,
 //! the colouring and bitwise determinism.
 
-use super::{CrowdConfig, CrowdFlat, CrowdFrame, CrowdModel, NearPair, COLOUR_NONE, UNCOLOURED};
+use super::{CrowdConfig, CrowdFlat, CrowdFrame, CrowdModel, NearPair, RestState, COLOUR_NONE, UNCOLOURED};
 use crate::contact::generate::{reduce_with_subgroups, shader_source_wg, SdfKinds};
 use crate::contact::model::{PairGpu, ParamsGpu, PatchGpu};
 use crate::contact::pipeline::to_patches;
@@ -67,7 +67,10 @@ pub struct CrowdParamsGpu {
     pub max_colours: u32,
     pub meta_stride: u32,
     pub patch_budget: u32,
-    pub _pad: [u32; 2],
+    pub sleep_frames: u32,
+    pub sleep_distance: f32,
+    pub sleep_half_cos: f32,
+    pub _pad: [u32; 3],
 }
 
 /// GPU mirror of `PassParams` in crowd_common.wgsl.
@@ -122,12 +125,19 @@ pub struct CrowdPipeline {
     near: [wgpu::ComputePipeline; 7],
     contacts: [wgpu::ComputePipeline; 2],
     merge: wgpu::ComputePipeline,
-    solve: [wgpu::ComputePipeline; 7],
+    solve: [wgpu::ComputePipeline; 9],
     near_groups: Vec<wgpu::BindGroup>,
     round_groups: Vec<wgpu::BindGroup>,
     contact_groups: Vec<wgpu::BindGroup>,
     merge_groups: Vec<wgpu::BindGroup>,
     solve_groups: Vec<wgpu::BindGroup>,
+}
+
+/// Byte offset of the sleeping state in a crowd's scratch buffer: after the status, the wrenches and the two
+/// blocks of rows (solve.wgsl's rest_index).
+fn rest_offset(world_count: u32, body_count: u32, cfg: &CrowdConfig) -> u64 {
+    let rows_vec4 = 2 * world_count as u64 * cfg.max_patches_per_world as u64 * 4 * crate::solver::gpu::ROW_VEC4;
+    crate::solver::gpu::rows_offset(world_count, body_count) + rows_vec4 * 16
 }
 
 fn too_large(gpu: &GpuContext, what: String, bytes: u64, hint: &str) -> Result<()> {
@@ -198,8 +208,8 @@ impl CrowdPipeline {
         let (w, cap, mp) = (world_count as u64, cfg.max_pairs as u64, contact.max_patches as u64);
         let meta_stride = M_HEAD + 4 * n + 9 * cfg.max_pairs;
         let patch_bytes = std::mem::size_of::<PatchGpu>() as u64;
-        let rows_vec4 = 2 * w * cfg.max_patches_per_world as u64 * 4 * crate::solver::gpu::ROW_VEC4;
-        let scratch_bytes = crate::solver::gpu::rows_offset(world_count, n) + rows_vec4 * 16;
+        // Then the sleeping state: two vec4 per body (solve.wgsl's rest_index).
+        let scratch_bytes = rest_offset(world_count, n, cfg) + w * n as u64 * 32;
         let hint = "use fewer worlds per pipeline, a smaller max_pairs, max_patches or max_patches_per_world";
         too_large(
             gpu,
@@ -238,7 +248,10 @@ impl CrowdPipeline {
             max_colours: cfg.max_colours,
             meta_stride,
             patch_budget: cfg.max_patches_per_world,
-            _pad: [0; 2],
+            sleep_frames: cfg.sleep.frames,
+            sleep_distance: cfg.sleep.distance,
+            sleep_half_cos: cfg.sleep.half_cos(),
+            _pad: [0; 3],
         };
         let contact_params = ParamsGpu {
             world_count,
@@ -333,8 +346,9 @@ impl CrowdPipeline {
             ["crowd_generate", "crowd_alloc"].map(|e| gpu.pipeline_on(&contact_layout, e, &contacts_src, e));
         let merge = gpu.pipeline_on(&merge_layout, "crowd_merge", &source(MERGE_WGSL), "crowd_merge");
         let solve_src = source(SOLVE_WGSL);
-        let constants = solver_constants(solver);
-        let solve: [wgpu::ComputePipeline; 7] = [
+        let mut constants = solver_constants(solver).to_vec();
+        constants.push(("SLEEP", if cfg.sleep.enabled() { 1.0 } else { 0.0 }));
+        let solve: [wgpu::ComputePipeline; 9] = [
             "crowd_build_rows",
             "crowd_velocities",
             "crowd_pass",
@@ -342,6 +356,8 @@ impl CrowdPipeline {
             "crowd_finish",
             "crowd_pass_resample",
             "crowd_pass_warm",
+            "crowd_wake",
+            "crowd_sleep",
         ]
         .map(|e| gpu.pipeline_on_with(&solve_layout, e, &solve_src, e, &constants));
         let near_groups = vec![
@@ -439,12 +455,28 @@ impl CrowdPipeline {
         for block in 0..2 {
             enc.clear_buffer(&self.scratch, rows_offset + (block * wc + w) * rows, Some(rows));
         }
+        let (rest, rest_world) = self.rest_range();
+        enc.clear_buffer(&self.scratch, rest + w * rest_world, Some(rest_world));
         enc.clear_buffer(&self.meta, w * stride, Some(stride));
         gpu.queue.submit([enc.finish()]);
     }
 
     fn control_range(&self) -> (u64, u64) {
         crate::solver::gpu::control_range(self.world_count, self.body_count)
+    }
+
+    /// Byte offset of the sleeping state in the scratch buffer and its bytes per world.
+    fn rest_range(&self) -> (u64, u64) {
+        (rest_offset(self.world_count, self.body_count, &self.cfg), self.body_count as u64 * 32)
+    }
+
+    /// Every body's sleeping state, shape [world_count * body_count] (waits; for tests and reports).
+    pub fn read_rest(&self, gpu: &GpuContext) -> Vec<RestState> {
+        let (offset, per_world) = self.rest_range();
+        let raw: Vec<[f32; 4]> = gpu.read_buffer_range(&self.scratch, offset, per_world * self.world_count as u64);
+        raw.chunks_exact(2)
+            .map(|r| RestState { com: Vec3::from_slice(&r[0][..3]), rot: glam::Vec4::from_array(r[1]), count: r[0][3] })
+            .collect()
     }
 
     /// Sets the external wrenches (as [`crate::solver::gpu::GpuSolver::write_control`]).
@@ -519,6 +551,11 @@ impl CrowdPipeline {
         self.set(&mut pass, &self.near[6], ng, None);
         pass.dispatch_workgroups(wc.div_ceil(64), 1, 1);
         let sg = &self.solve_groups;
+        let sleep = self.cfg.sleep.enabled();
+        if sleep {
+            self.set(&mut pass, &self.solve[7], sg, None);
+            pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
+        }
         self.set(&mut pass, &self.solve[0], sg, None);
         pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
         let sweep = |pass: &mut wgpu::ComputePass, phase: u32| {
@@ -545,6 +582,10 @@ impl CrowdPipeline {
             for it in 0..self.solver.vel_iters {
                 sweep(&mut pass, if it == 0 { 3 } else { 4 });
             }
+        }
+        if sleep {
+            self.set(&mut pass, &self.solve[8], sg, None);
+            pass.dispatch_workgroups(bodies_x, wc, 1);
         }
         self.set(&mut pass, &self.solve[4], sg, None);
         pass.dispatch_workgroups(wc.div_ceil(64), 1, 1);

@@ -23,6 +23,23 @@
 //!    sequential Gauss-Seidel sweep over the pairs sorted by colour, which is what the CPU twin runs
 //!    ([`crate::solver::step_cpu`] on the pairs in that order). Warm starting across frames finds last
 //!    frame's entry of the same body pair by binary search in last frame's sorted keys.
+//! 5. **Sleeping** ([`CrowdConfig::sleep`], off unless set): a pile settles but a few bodies may never
+//!    quite stop (docs/BENCHMARKS.md: a nut rocking between two poses 0.7 mm apart for good, floor nuts
+//!    creeping under leaning neighbours). As in PhysX, Bullet and rapier, a body that has stayed put long
+//!    enough is taken out of the dynamics: after the last substep (`crowd_sleep`) each awake dynamic body
+//!    compares its centre of mass and rotation with a reference pose; within [`SleepConfig::distance`] and
+//!    [`SleepConfig::angle`] its count of still frames grows, else the reference becomes the current pose
+//!    and the count restarts at one (the body *moved* this frame). At more than [`SleepConfig::frames`]
+//!    a dynamic body falls asleep (a kinematic one never does, but standing still it wakes nobody): its
+//!    velocity is set to zero, and from then on it takes no gravity and no impulses and is not integrated
+//!    (the solver sees an infinitely heavy body, as a static one). Before the rows are built
+//!    (`crowd_wake`), every touching pair (at least one patch) with a sleeping body and a body that moved
+//!    last frame wakes the sleeper; it counts as one frame still with its old reference, so it wakes its
+//!    own neighbours only if it is then pushed out of its bounds. There are no islands: a body resting on
+//!    a sleeper stays awake until it too stays put. The state is two vec4 per body at the end of the
+//!    solver scratch (reference centre of mass and count, reference rotation); uploading a state or
+//!    resetting a world wakes its bodies. Sleepers still get contacts generated every frame (skipping
+//!    pairs of two sleepers would need the wake test before generation; not done).
 //!
 //! A world whose near pairs exceed [`CrowdConfig::max_pairs`], whose colouring needs more than
 //! [`CrowdConfig::max_colours`] colours or more than [`CrowdConfig::colour_rounds`] rounds, or whose
@@ -169,13 +186,57 @@ pub struct CrowdConfig {
     pub colour_rounds: u32,
     /// Patches (of all near pairs together) a world may hold: the solver's rows are allocated per patch.
     pub max_patches_per_world: u32,
+    /// Sleeping of bodies that stay put (module doc, 5.); off by default.
+    pub sleep: SleepConfig,
+}
+
+/// When a body of a many-body world falls asleep (module doc, 5.): it has stayed within `distance` and
+/// `angle` of one pose for `frames` frames in a row. PhysX, which the paper's piles ran on, sleeps a body
+/// whose mass-normalised kinetic energy stays below a threshold (default 5e-5 x (10 m/s)^2 = 0.005 J/kg,
+/// about 0.1 m/s) for its wake counter (0.4 s) (PhysX 4 guide, "Rigid Body Dynamics: Sleeping"); this
+/// criterion is on displacement instead, so a body rocking in place sleeps and one creeping steadily does
+/// not.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SleepConfig {
+    /// Frames a body must stay within the bounds below to fall asleep; 0: bodies never sleep.
+    pub frames: u32,
+    /// Largest displacement of the centre of mass from the reference pose [m].
+    pub distance: f32,
+    /// Largest rotation from the reference pose [rad].
+    pub angle: f32,
+}
+
+impl SleepConfig {
+    /// Bodies never sleep.
+    pub const OFF: SleepConfig = SleepConfig { frames: 0, distance: 0.0, angle: 0.0 };
+
+    pub fn enabled(&self) -> bool {
+        self.frames > 0
+    }
+
+    /// cos(angle / 2): a unit quaternion q is within `angle` of r when |q . r| >= this.
+    pub fn half_cos(&self) -> f32 {
+        (0.5 * self.angle).cos()
+    }
+}
+
+impl Default for SleepConfig {
+    fn default() -> Self {
+        SleepConfig::OFF
+    }
 }
 
 impl CrowdConfig {
     /// Room for `bodies` bodies with about 10 near pairs each (at most 10000) and 8 patches per pair.
     pub fn for_bodies(bodies: u32) -> Self {
         let max_pairs = (10 * bodies).clamp(64, 10_000);
-        CrowdConfig { max_pairs, max_colours: 32, colour_rounds: 64, max_patches_per_world: 8 * max_pairs }
+        CrowdConfig {
+            max_pairs,
+            max_colours: 32,
+            colour_rounds: 64,
+            max_patches_per_world: 8 * max_pairs,
+            sleep: SleepConfig::OFF,
+        }
     }
 
     pub fn validate(&self) -> Result<()> {
@@ -195,6 +256,23 @@ impl CrowdConfig {
         }
         if self.max_patches_per_world == 0 {
             return bad("max_patches_per_world", 0, "at least 1");
+        }
+        let sleep = &self.sleep;
+        if sleep.frames == 1 || sleep.frames > 1_000_000 {
+            // A woken body counts as one frame still (module doc, 5.): a single frame would put it straight
+            // back to sleep.
+            return bad("sleep.frames", sleep.frames, "0 (never sleep) or 2..=1000000 frames");
+        }
+        if sleep.enabled() {
+            let badf = |field: &'static str, value: f32, expected: &str| {
+                Err(EngineError::Config { field, value: value.to_string(), expected: expected.into() })
+            };
+            if !(sleep.distance.is_finite() && sleep.distance > 0.0) {
+                return badf("sleep.distance", sleep.distance, "a finite distance > 0 [m]");
+            }
+            if !(sleep.angle > 0.0 && sleep.angle < std::f32::consts::PI) {
+                return badf("sleep.angle", sleep.angle, "an angle in (0, pi) [rad]");
+            }
         }
         Ok(())
     }
@@ -489,6 +567,8 @@ pub struct CrowdCpu {
     pub bodies: BodyModel,
     /// Per world: last frame's pairs in solve order and their rows.
     warm: Vec<(Vec<NearPair>, WarmStart)>,
+    /// Sleeping state per body, shape [world_count * body_count] (module doc, 5.).
+    pub rest: Vec<RestState>,
     /// A model of one world's near pairs, rebuilt every frame (triangles and SDF values set once).
     world_flat: FlatModel,
 }
@@ -516,6 +596,7 @@ impl CrowdCpu {
             solver: solver.clone(),
             bodies: bodies.clone(),
             warm: Vec::new(),
+            rest: Vec::new(),
             world_flat,
         })
     }
@@ -523,6 +604,7 @@ impl CrowdCpu {
     /// Forgets the warm-start impulses of every world.
     pub fn forget_warm_start(&mut self) {
         self.warm.clear();
+        self.rest.clear();
     }
 
     /// Forgets world `world`'s warm-start impulses (the twin of [`gpu::CrowdPipeline::reset_world`]; the
@@ -530,6 +612,10 @@ impl CrowdCpu {
     pub fn reset_world(&mut self, world: usize) {
         if let Some(w) = self.warm.get_mut(world) {
             *w = Default::default();
+        }
+        let n = self.flat.model.body_count as usize;
+        if let Some(r) = self.rest.get_mut(world * n..(world + 1) * n) {
+            r.fill(RestState::default());
         }
     }
 
@@ -539,6 +625,7 @@ impl CrowdCpu {
         let n = self.flat.model.body_count as usize;
         let world_count = state.body_q.len() / n;
         self.warm.resize_with(world_count, Default::default);
+        self.rest.resize(world_count * n, RestState::default());
         let xf: Vec<Xf> = state.body_q.iter().map(|t| t.xf()).collect();
         let mut out = Vec::with_capacity(world_count);
         for w in 0..world_count {
@@ -597,6 +684,28 @@ impl CrowdCpu {
             let place: std::collections::HashMap<(u32, u32), usize> =
                 solve_pairs.iter().enumerate().map(|(k, p)| (key(p), k)).collect();
             warm.remap_pairs(|old| place.get(&key(&old_pairs[old])).copied());
+            let sleep = self.cfg.sleep;
+            let rest = &mut self.rest[range.clone()];
+            let mut sleepers = None;
+            if sleep.enabled() {
+                for (k, np) in solve_pairs.iter().enumerate() {
+                    if np.b != NO_BODY && !contacts.patches[k].is_empty() {
+                        wake_by(rest, np.a as usize, np.b as usize, &sleep);
+                        wake_by(rest, np.b as usize, np.a as usize, &sleep);
+                    }
+                }
+                if rest.iter().any(|r| r.asleep(&sleep)) {
+                    // The solver sees a sleeper as a static body (as solve.wgsl's body_awake).
+                    let mut m = self.bodies.clone();
+                    for (b, r) in rest.iter().enumerate() {
+                        if r.asleep(&sleep) {
+                            m.body_inv_mass[b] = 0.0;
+                            m.body_inv_inertia[b] = glam::Mat3::ZERO;
+                        }
+                    }
+                    sleepers = Some(m);
+                }
+            }
             let mut ws = BodyState {
                 body_q: state.body_q[range.clone()].to_vec(),
                 body_qd: state.body_qd[range.clone()].to_vec(),
@@ -606,13 +715,93 @@ impl CrowdCpu {
             } else {
                 Control { body_f: control.body_f[range.clone()].to_vec() }
             };
-            let ok = step_cpu(&self.bodies, &mut ws, &contacts, &self.world_flat, &self.solver, &cw, &mut warm)[0];
+            let model = sleepers.as_ref().unwrap_or(&self.bodies);
+            let ok = step_cpu(model, &mut ws, &contacts, &self.world_flat, &self.solver, &cw, &mut warm)[0];
+            if sleep.enabled() {
+                for (b, r) in rest.iter_mut().enumerate() {
+                    let kinematic = self.bodies.is_kinematic(b);
+                    if self.bodies.body_inv_mass[b] > 0.0 || kinematic {
+                        r.update(&ws.body_q[b], self.bodies.body_com[b], &mut ws.body_qd[b], kinematic, &sleep);
+                    }
+                }
+            }
             state.body_q[range.clone()].copy_from_slice(&ws.body_q);
             state.body_qd[range].copy_from_slice(&ws.body_qd);
             self.warm[w] = (solve_pairs, warm);
             out.push((frame, ok));
         }
         out
+    }
+}
+
+/// One body's sleeping state (module doc, 5.; solve.wgsl's rest_index): the reference pose and the frames
+/// the body has stayed within [`SleepConfig`]'s bounds of it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RestState {
+    /// Reference centre of mass, world frame [m].
+    pub com: Vec3,
+    /// Reference rotation (quaternion x, y, z, w).
+    pub rot: glam::Vec4,
+    /// 0: no reference yet; 1: the reference was set this frame (the body moved); k + 1: still for k frames;
+    /// above [`SleepConfig::frames`]: asleep. A float, as the GPU stores it.
+    pub count: f32,
+}
+
+impl Default for RestState {
+    fn default() -> Self {
+        // As the zeroed GPU scratch (the rotation is read only once count > 0).
+        RestState { com: Vec3::ZERO, rot: glam::Vec4::ZERO, count: 0.0 }
+    }
+}
+
+impl RestState {
+    pub fn asleep(&self, sleep: &SleepConfig) -> bool {
+        sleep.enabled() && self.count > sleep.frames as f32
+    }
+
+    /// Whether the body left its bounds (or had none) at the last update.
+    pub fn moved(&self) -> bool {
+        self.count <= 1.0
+    }
+
+    /// The end-of-frame update of a dynamic or kinematic body at pose `q` with centre of mass `com_local`
+    /// (body frame); a body falling asleep has its velocity `qd` zeroed; a kinematic body never sleeps
+    /// (solve.wgsl's crowd_sleep).
+    pub fn update(
+        &mut self,
+        q: &crate::contact::TransformGpu,
+        com_local: Vec3,
+        qd: &mut [Vec3; 2],
+        kinematic: bool,
+        sleep: &SleepConfig,
+    ) {
+        if self.asleep(sleep) {
+            return;
+        }
+        let xf = q.xf();
+        let com = xf.point(com_local);
+        if self.count > 0.0
+            && (com - self.com).length() <= sleep.distance
+            && xf.q.dot(self.rot).abs() >= sleep.half_cos()
+        {
+            self.count += 1.0;
+            if kinematic {
+                self.count = self.count.min(sleep.frames as f32);
+            }
+            if self.asleep(sleep) {
+                *qd = [Vec3::ZERO; 2];
+            }
+        } else {
+            *self = RestState { com, rot: xf.q, count: 1.0 };
+        }
+    }
+}
+
+/// `rest[a]` wakes if it sleeps and `rest[b]` moved last frame (solve.wgsl's crowd_wake): it counts as one
+/// frame still with its old reference.
+fn wake_by(rest: &mut [RestState], a: usize, b: usize, sleep: &SleepConfig) {
+    if rest[a].asleep(sleep) && rest[b].moved() {
+        rest[a].count = 2.0;
     }
 }
 

@@ -7,7 +7,11 @@
 //
 // solver_scratch: status per world, wrenches per body (as solver.wgsl), then two blocks of rows, used by
 // alternate frames (frame & 1), each [world_count * patch_budget patches * 4 rows]: a frame's rows are
-// built from last frame's, which stay in the other block.
+// built from last frame's, which stay in the other block; then the sleeping state, two vec4 per body
+// (rest_index).
+//
+// Sleeping (crowd/mod.rs, 5.; compiled in only when CrowdConfig::sleep is on): crowd_wake before the rows
+// are built, crowd_sleep after the last substep.
 
 @group(0) @binding(0) var<uniform> sp: SolverParams;
 @group(0) @binding(1) var<uniform> cp: CrowdParams;
@@ -21,8 +25,26 @@
 @group(2) @binding(2) var<storage, read_write> solver_scratch: array<vec4<f32>>;
 @group(3) @binding(0) var<uniform> pp: PassParams;
 
+override SLEEP: bool = false;
+
 fn crowd_row(par: u32, w: u32, slot: u32) -> u32 {
     return rows_base() + ((par * sp.world_count + w) * cp.patch_budget + slot) * 4u * ROW;
+}
+
+// Sleeping state of global body g: [reference centre of mass (world, m), count], [reference rotation].
+// count (a float): 0 no reference yet, 1 the reference was set this frame (the body moved), k + 1 still
+// for k frames, above cp.sleep_frames asleep (RestState in crowd/mod.rs).
+fn rest_index(g: u32) -> u32 {
+    return rows_base() + 2u * sp.world_count * cp.patch_budget * 4u * ROW + 2u * g;
+}
+
+fn rest_count(g: u32) -> f32 {
+    return solver_scratch[rest_index(g)].w;
+}
+
+// solver_core.wgsl's hook: a sleeping body takes no gravity and no impulses and is not integrated.
+fn body_awake(g: u32) -> bool {
+    return !SLEEP || rest_count(g) <= f32(cp.sleep_frames);
 }
 
 fn ready(w: u32) -> bool {
@@ -85,6 +107,72 @@ fn crowd_build_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
         build_patch_rows(g0, old0, g, old_tag, pair, va, vb, patches[g * MAX_PATCHES + i], frame);
+    }
+}
+
+// A touching pair (at least one patch) wakes a sleeping body whose partner moved last frame; the woken
+// body counts as one frame still (2), so it wakes its own neighbours only if it is then pushed out of its
+// bounds. Pairs that wake the same body write the same value, and no pair reads a count this kernel
+// changes into or out of "moved" (<= 1): the result does not depend on the order of the invocations.
+@compute @workgroup_size(64)
+fn crowd_wake(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let e = gid.x;
+    let w = gid.y;
+    if (!SLEEP || e >= crowd_meta[meta_base(w) + M_COUNT] || !ready(w)) {
+        return;
+    }
+    let pair = pairs[w * cp.cap + e];
+    if (pair.body_b == NONE || crowd_meta[m_patch_count(w) + e] == 0u) {
+        return;
+    }
+    let ga = w * sp.body_count + pair.body_a;
+    let gb = w * sp.body_count + pair.body_b;
+    wake_by(ga, gb);
+    wake_by(gb, ga);
+}
+
+fn wake_by(g: u32, other: u32) {
+    if (!body_awake(g) && rest_count(other) <= 1.0) {
+        solver_scratch[rest_index(g)].w = 2.0;
+    }
+}
+
+// After the last substep: an awake dynamic or kinematic body within the bounds of its reference pose counts one more
+// frame still (and falls asleep, its velocity zeroed, above cp.sleep_frames); otherwise its current pose
+// becomes the reference.
+@compute @workgroup_size(64)
+fn crowd_sleep(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let b = gid.x;
+    let w = gid.y;
+    if (!SLEEP || b >= sp.body_count || !ready(w)) {
+        return;
+    }
+    let kinematic = bodies[b].flags.x != 0u;
+    if (bodies[b].com_inv_mass.w <= 0.0 && !kinematic) {
+        return;
+    }
+    let g = w * sp.body_count + b;
+    if (!body_awake(g)) {
+        return;
+    }
+    let i = rest_index(g);
+    let count = solver_scratch[i].w;
+    let t = body_q[g];
+    let com = t.p.xyz + quat_rotate(t.q, bodies[b].com_inv_mass.xyz);
+    let still = length(com - solver_scratch[i].xyz) <= cp.sleep_distance
+        && abs(dot(t.q, solver_scratch[i + 1u])) >= cp.sleep_half_cos;
+    if (count > 0.0 && still) {
+        // A kinematic body moves by the velocity it is given, so it never sleeps; standing still, it wakes
+        // nobody.
+        let next = select(count + 1.0, min(count + 1.0, f32(cp.sleep_frames)), kinematic);
+        solver_scratch[i].w = next;
+        if (next > f32(cp.sleep_frames)) {
+            body_qd[2u * g] = vec4<f32>(0.0);
+            body_qd[2u * g + 1u] = vec4<f32>(0.0);
+        }
+    } else {
+        solver_scratch[i] = vec4<f32>(com, 1.0);
+        solver_scratch[i + 1u] = t.q;
     }
 }
 

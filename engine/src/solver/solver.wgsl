@@ -18,6 +18,11 @@
 // Laid out as control_index and rows_base say: status per world, wrenches per body, ROW * max_rows per world.
 @group(2) @binding(2) var<storage, read_write> solver_scratch: array<vec4<f32>>;
 
+// Whether global body g takes part in the dynamics (crowd/solve.wgsl: not asleep); every body here does.
+fn body_awake(g: u32) -> bool {
+    return true;
+}
+
 // Row of slot k of patch i of pair p: rows keep their patch slots (an empty slot is a row with pair NONE),
 // so a contact can look for itself among its patch's rows of last frame.
 fn row_index(row0: u32, p: u32, i: u32, k: u32) -> u32 {

@@ -124,7 +124,8 @@ fn dyn_of(world: u32, b: u32) -> Dyn {
         return Dyn(NONE, 0.0, mat3x3<f32>());
     }
     let g = world * sp.body_count + b;
-    let inv_mass = bodies[b].com_inv_mass.w;
+    // A sleeping body (crowd/solve.wgsl) responds as a static one.
+    let inv_mass = select(0.0, bodies[b].com_inv_mass.w, body_awake(g));
     var inv_i = mat3x3<f32>();
     if (inv_mass > 0.0) {
         inv_i = world_inv_inertia(g, b);
@@ -449,8 +450,8 @@ fn pair_pass(world: u32, p: u32, first: u32, count: u32, h: f32, bias: bool, war
 // Velocity update of body b (global index first + b) over a substep h: gravity and the external wrench.
 fn integrate_velocity(first: u32, b: u32, h: f32) {
     let m = bodies[b];
-    if (m.com_inv_mass.w > 0.0) {
-        let g = first + b;
+    let g = first + b;
+    if (m.com_inv_mass.w > 0.0 && body_awake(g)) {
         // External wrench (Control::body_f): force through the COM, torque about it, world frame.
         let f = solver_scratch[control_index(g)].xyz;
         let tau = solver_scratch[control_index(g) + 1u].xyz;
@@ -466,8 +467,8 @@ fn integrate_velocity(first: u32, b: u32, h: f32) {
 // velocity, the rotation by the angular velocity's quaternion derivative).
 fn integrate_position(first: u32, b: u32, h: f32) {
     let m = bodies[b];
-    if (m.com_inv_mass.w > 0.0 || m.flags.x != 0u) {
-        let g = first + b;
+    let g = first + b;
+    if ((m.com_inv_mass.w > 0.0 && body_awake(g)) || m.flags.x != 0u) {
         let t = body_q[g];
         let c = t.p.xyz + quat_rotate(t.q, m.com_inv_mass.xyz) + body_qd[2u * g].xyz * h;
         let w = body_qd[2u * g + 1u].xyz;
