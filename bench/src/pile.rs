@@ -241,12 +241,15 @@ pub struct PileReport {
     pub patches: u64,
     pub touching_pairs: u64,
     /// Last frame, world 0: pairs of two bodies (not body and ground) with a contact within 0.5 mm, i.e.
-    /// bodies lying on bodies ...
+    /// bodies lying on bodies (with sleeping, whose pairs of sleepers get no contacts: at the end of the
+    /// woken check below, every body awake) ...
     pub resting_body_pairs: u64,
     /// ... and the highest centre of mass [mm] (a single layer of toruses: 8 mm).
     pub pile_height_mm: f64,
     pub wall_s: f64,
     pub ms_per_frame: f64,
+    /// ... and per simulated second in turn (a settling pile, sleepers that get no contacts) [ms].
+    pub ms_per_frame_per_second: Vec<f64>,
     /// Where the time goes (paper Table I), timed after the run on its last state: contact handling and
     /// the solver step [ms per frame].
     pub handling_ms_per_frame: f64,
@@ -351,6 +354,8 @@ struct Tally {
     top: f64,
     released: f64,
     wall: f64,
+    /// Wall time of each frame [s].
+    frame_walls: Vec<f64>,
     max_speed: f64,
     max_energy: f64,
     finite: bool,
@@ -370,6 +375,12 @@ struct Tally {
 }
 
 impl Tally {
+    /// A frame's wall time [s].
+    fn add_wall(&mut self, secs: f64) {
+        self.wall += secs;
+        self.frame_walls.push(secs);
+    }
+
     fn new(scene: &PileScene, run: &PileRun, state: &BodyState) -> Self {
         let n = run.bodies as usize;
         let start_com = coms(scene, state);
@@ -381,6 +392,7 @@ impl Tally {
             top: start_com[..n].iter().map(|c| c.z).fold(0.0f32, f32::max) as f64,
             released: start_com[..n].iter().map(|c| c.z as f64).sum::<f64>() * scene.g(),
             wall: 0.0,
+            frame_walls: Vec::new(),
             max_speed: 0.0,
             max_energy: e0,
             finite: true,
@@ -521,6 +533,11 @@ fn report(
         pile_height_mm: pile_height as f64 * 1e3,
         wall_s: t.wall,
         ms_per_frame: t.wall * 1e3 / t.frames as f64,
+        ms_per_frame_per_second: t
+            .frame_walls
+            .chunks(per_second)
+            .map(|c| c.iter().sum::<f64>() * 1e3 / c.len() as f64)
+            .collect(),
         handling_ms_per_frame: handling_ms,
         solve_ms_per_frame: solve_ms,
         real_time_factor_per_world: sim / t.wall,
@@ -611,7 +628,7 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
         let clock = Instant::now();
         pipe.submit_frame(gpu);
         gpu.wait();
-        t.wall += clock.elapsed().as_secs_f64();
+        t.add_wall(clock.elapsed().as_secs_f64());
         let (frames, patches): (Vec<_>, Vec<_>) = pipe.read_patches(gpu).into_iter().unzip();
         let deepest = patches
             .iter()
@@ -643,20 +660,30 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
         t.after(scene, s, flags != 0, flags, deepest);
     }
     let stats = pipe.read_stats(gpu);
-    let (frame0, patches0) = &pipe.read_patches(gpu)[0];
+    let resting = |pipe: &CrowdPipeline| {
+        let (frame0, patches0) = &pipe.read_patches(gpu)[0];
+        frame0
+            .pairs
+            .iter()
+            .zip(patches0)
+            .filter(|(np, ps)| np.b != NO_BODY && ps.iter().any(|p| p.contacts.iter().any(|k| k.depth <= 0.5e-3)))
+            .count() as u64
+    };
+    let mut resting_body_pairs = resting(&pipe);
     // After the last frame's figures are read: it steps the pile on.
-    let woken = if run.sleep.enabled() { Some(woken_drift(gpu, &pipe, scene, t.n)) } else { None };
+    let woken = if run.sleep.enabled() {
+        let w = woken_drift(gpu, &pipe, scene, t.n);
+        resting_body_pairs = resting(&pipe);
+        Some(w)
+    } else {
+        None
+    };
     let c = LastContacts {
         candidates: stats.iter().map(|s| s.candidates).sum(),
         contacts: stats.iter().map(|s| s.contacts as u64).sum(),
         patches: stats.iter().map(|s| s.patches as u64).sum(),
         touching: stats.iter().map(|s| s.touching_pairs as u64).sum(),
-        resting_body_pairs: frame0
-            .pairs
-            .iter()
-            .zip(patches0)
-            .filter(|(np, ps)| np.b != NO_BODY && ps.iter().any(|p| p.contacts.iter().any(|k| k.depth <= 0.5e-3)))
-            .count() as u64,
+        resting_body_pairs,
         near_pairs: stats[0].pairs as u64,
         colours,
         asleep_per_second,
@@ -681,7 +708,7 @@ fn run_serial(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pile
         let clock = Instant::now();
         solver.submit_frame(gpu, &pipe);
         gpu.wait();
-        t.wall += clock.elapsed().as_secs_f64();
+        t.add_wall(clock.elapsed().as_secs_f64());
         let deepest = crate::scene::min_depth_all(&pipe.read(gpu));
         let (s, _) = solver.read_state(gpu, &pipe);
         let over = solver.worlds_over_loop_budget(gpu).iter().any(|&o| o);

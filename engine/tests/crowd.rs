@@ -436,8 +436,9 @@ fn a_settled_stack_falls_asleep_alike_on_the_gpu_and_in_the_twin_and_a_pusher_wa
     /// [m]: a box resting on the table moves by micrometres; one pushed at PUSH_SPEED by 0.83 mm a frame.
     const SLEEP_DISTANCE: f32 = 5e-4;
     const SLEEP_ANGLE: f32 = 0.01;
-    /// The kinematic pusher's speed [m/s] along +x; it starts 38 mm left of the stack and comes within the
-    /// contact offset after about 40 frames, when the stack has slept for about 15.
+    /// The kinematic pusher's speed [m/s] along +x; it starts 88 mm left of the stack, comes near it
+    /// (bounding spheres within the contact offset: it wakes the boxes it nears) after about 59 frames and
+    /// touches it after about 82, when the stack has slept for about 40.
     const PUSH_SPEED: f32 = 0.05;
     const FRAMES: usize = 120;
     /// Frame by which every box is asleep, before the pusher reaches them.
@@ -453,7 +454,7 @@ fn a_settled_stack_falls_asleep_alike_on_the_gpu_and_in_the_twin_and_a_pusher_wa
     stack.body_q.truncate(N);
     stack.body_qd.truncate(N);
     let mut start = stack.clone();
-    start.body_q.push(TransformGpu::new(Vec3::new(-0.12, 0.0, H.z + 0.0005), Quat::IDENTITY));
+    start.body_q.push(TransformGpu::new(Vec3::new(-0.15, 0.0, H.z + 0.0005), Quat::IDENTITY));
     start.body_qd.push([Vec3::new(PUSH_SPEED, 0.0, 0.0), Vec3::ZERO]);
     let sleep = SleepConfig { frames: SLEEP_FRAMES, distance: SLEEP_DISTANCE, angle: SLEEP_ANGLE };
     let cfg = CrowdConfig { sleep, ..CrowdConfig::for_bodies(N as u32 + 1) };
@@ -464,7 +465,8 @@ fn a_settled_stack_falls_asleep_alike_on_the_gpu_and_in_the_twin_and_a_pusher_wa
     pipe.write_state(gpu(), &start);
     let mut state = start.clone();
     let mut last = start.clone();
-    let (mut asleep_at, mut slept_frames, mut woke) = (None, 0usize, Vec::new());
+    let mut was_asleep = vec![false; N + 1];
+    let (mut asleep_at, mut slept_frames, mut woke, mut dormant_pairs) = (None, 0usize, Vec::new(), 0usize);
     for frame in 0..FRAMES {
         pipe.submit_frame(gpu());
         let (g, ok) = pipe.read_state(gpu());
@@ -488,6 +490,16 @@ fn a_settled_stack_falls_asleep_alike_on_the_gpu_and_in_the_twin_and_a_pusher_wa
             }
         }
         let stack_asleep = gpu_asleep[..N].iter().filter(|&&a| a).count();
+        // Pairs whose bodies all slept through the frame (asleep when it began and not woken) get no
+        // contacts (near_dormant).
+        let (gf, patches) = &pipe.read_patches(gpu())[0];
+        for (np, ps) in gf.pairs.iter().zip(patches) {
+            let asleep = |b: u32| b == NO_BODY || (gpu_asleep[b as usize] && was_asleep[b as usize]);
+            if asleep(np.a) && asleep(np.b) {
+                assert!(ps.is_empty(), "frame {frame}: sleeping pair ({}, {}) has contacts", np.a, np.b);
+                dormant_pairs += 1;
+            }
+        }
         if stack_asleep == N {
             asleep_at.get_or_insert(frame);
             slept_frames += 1;
@@ -500,6 +512,7 @@ fn a_settled_stack_falls_asleep_alike_on_the_gpu_and_in_the_twin_and_a_pusher_wa
             }
         }
         // Each side keeps its own rows and sleeping state; the poses are re-synchronised (as above).
+        was_asleep = gpu_asleep;
         last = g.clone();
         state = g;
     }
@@ -507,12 +520,13 @@ fn a_settled_stack_falls_asleep_alike_on_the_gpu_and_in_the_twin_and_a_pusher_wa
         .map(|b| (Vec3::from_slice(&last.body_q[b].p[..3]) - Vec3::from_slice(&stack.body_q[b].p[..3])).length())
         .collect();
     println!(
-        "stack asleep from frame {asleep_at:?} for {slept_frames} frames; woken by the pusher: {woke:?}; moved [mm]: {:?}",
+        "stack asleep from frame {asleep_at:?} for {slept_frames} frames ({dormant_pairs} pair-frames without contacts); woken by the pusher: {woke:?}; moved [mm]: {:?}",
         moved.iter().map(|m| (m * 1e4).round() / 10.0).collect::<Vec<_>>()
     );
     let asleep_at = asleep_at.expect("the stack fell asleep");
     assert!(asleep_at <= ASLEEP_BY, "the stack fell asleep only at frame {asleep_at}");
     assert!(woke.len() >= 2, "the pusher woke {woke:?}");
+    assert!(dormant_pairs >= 6 * 20, "{dormant_pairs} pair-frames left out while asleep");
     for &b in &woke {
         assert!(moved[b] > 0.01, "box {b} woke but moved {} m", moved[b]);
     }

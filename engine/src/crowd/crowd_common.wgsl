@@ -20,7 +20,8 @@ struct CrowdParams {
     sleep_frames: u32,
     sleep_distance: f32,
     sleep_half_cos: f32,
-    _pad0: u32,
+    // vec4 index of the sleeping state in the solver scratch (solve.wgsl rest_index).
+    rest_base: u32,
     _pad1: u32,
     _pad2: u32,
 }

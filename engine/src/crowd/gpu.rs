@@ -70,7 +70,9 @@ pub struct CrowdParamsGpu {
     pub sleep_frames: u32,
     pub sleep_distance: f32,
     pub sleep_half_cos: f32,
-    pub _pad: [u32; 3],
+    /// vec4 index of the sleeping state in the solver scratch.
+    pub rest_base: u32,
+    pub _pad: [u32; 2],
 }
 
 /// GPU mirror of `PassParams` in crowd_common.wgsl.
@@ -122,7 +124,7 @@ pub struct CrowdPipeline {
     pub patches: wgpu::Buffer,
     args: wgpu::Buffer,
     pass_stride: u64,
-    near: [wgpu::ComputePipeline; 7],
+    near: [wgpu::ComputePipeline; 8],
     contacts: [wgpu::ComputePipeline; 2],
     merge: wgpu::ComputePipeline,
     solve: [wgpu::ComputePipeline; 9],
@@ -251,7 +253,8 @@ impl CrowdPipeline {
             sleep_frames: cfg.sleep.frames,
             sleep_distance: cfg.sleep.distance,
             sleep_half_cos: cfg.sleep.half_cos(),
-            _pad: [0; 3],
+            rest_base: (rest_offset(world_count, n, cfg) / 16) as u32,
+            _pad: [0; 2],
         };
         let contact_params = ParamsGpu {
             world_count,
@@ -325,7 +328,7 @@ impl CrowdPipeline {
         };
         let near_layout = gpu.explicit_layout(
             "crowd-near",
-            &[&[Binding::Uniform, ro, ro], &[ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
+            &[&[Binding::Uniform, ro, ro], &[ro, ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
         );
         let contact_layout = gpu.explicit_layout(
             "crowd-contacts",
@@ -338,9 +341,17 @@ impl CrowdPipeline {
             &[&[Binding::Uniform, Binding::Uniform, ro, ro], &[ro, ro, ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
         );
         let near_src = source(NEAR_WGSL);
-        let near: [wgpu::ComputePipeline; 7] =
-            ["keep_keys", "near_count", "near_scan", "near_emit", "incidence", "colour_round", "colour_sort"]
-                .map(|e| gpu.pipeline_on(&near_layout, e, &near_src, e));
+        let near: [wgpu::ComputePipeline; 8] = [
+            "keep_keys",
+            "near_count",
+            "near_scan",
+            "near_emit",
+            "incidence",
+            "colour_round",
+            "colour_sort",
+            "near_dormant",
+        ]
+        .map(|e| gpu.pipeline_on(&near_layout, e, &near_src, e));
         let contacts_src = source(CONTACTS_WGSL);
         let contacts: [wgpu::ComputePipeline; 2] =
             ["crowd_generate", "crowd_alloc"].map(|e| gpu.pipeline_on(&contact_layout, e, &contacts_src, e));
@@ -362,7 +373,7 @@ impl CrowdPipeline {
         .map(|e| gpu.pipeline_on_with(&solve_layout, e, &solve_src, e, &constants));
         let near_groups = vec![
             gpu.bind_explicit(&near_layout, 0, &[&cp_buf, &templates, &rules], 0),
-            gpu.bind_explicit(&near_layout, 1, &[&body_q], 0),
+            gpu.bind_explicit(&near_layout, 1, &[&body_q, &scratch], 0),
             gpu.bind_explicit(&near_layout, 2, &[&crowd_pairs, &meta, &args], 0),
             gpu.bind_explicit(&near_layout, 3, &[&pass_buf], 16),
         ];
@@ -371,7 +382,7 @@ impl CrowdPipeline {
         let stand_in = gpu.storage_buffer_zeroed("crowd-args-stand-in", ARGS_WORDS * 4);
         let round_groups = vec![
             gpu.bind_explicit(&near_layout, 0, &[&cp_buf, &templates, &rules], 0),
-            gpu.bind_explicit(&near_layout, 1, &[&body_q], 0),
+            gpu.bind_explicit(&near_layout, 1, &[&body_q, &scratch], 0),
             gpu.bind_explicit(&near_layout, 2, &[&crowd_pairs, &meta, &stand_in], 0),
             gpu.bind_explicit(&near_layout, 3, &[&pass_buf], 16),
         ];
@@ -526,6 +537,14 @@ impl CrowdPipeline {
             self.set(&mut pass, k, ng, None);
             pass.dispatch_workgroups(x, y, 1);
         }
+        if self.cfg.sleep.enabled() {
+            // Wake sleepers near bodies that moved, then leave out the pairs whose bodies all sleep.
+            self.set(&mut pass, &self.solve[7], &self.solve_groups, None);
+            pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
+            // (Dispatched from crowd_args: it binds the stand-in, as the colouring rounds.)
+            self.set(&mut pass, &self.near[7], &self.round_groups, None);
+            pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
+        }
         let cg = &self.contact_groups;
         self.set(&mut pass, &self.contacts[0], cg, None);
         pass.dispatch_workgroups_indirect(&self.args, A_GENERATE * 4);
@@ -551,11 +570,6 @@ impl CrowdPipeline {
         self.set(&mut pass, &self.near[6], ng, None);
         pass.dispatch_workgroups(wc.div_ceil(64), 1, 1);
         let sg = &self.solve_groups;
-        let sleep = self.cfg.sleep.enabled();
-        if sleep {
-            self.set(&mut pass, &self.solve[7], sg, None);
-            pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
-        }
         self.set(&mut pass, &self.solve[0], sg, None);
         pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
         let sweep = |pass: &mut wgpu::ComputePass, phase: u32| {
@@ -583,7 +597,7 @@ impl CrowdPipeline {
                 sweep(&mut pass, if it == 0 { 3 } else { 4 });
             }
         }
-        if sleep {
+        if self.cfg.sleep.enabled() {
             self.set(&mut pass, &self.solve[8], sg, None);
             pass.dispatch_workgroups(bodies_x, wc, 1);
         }

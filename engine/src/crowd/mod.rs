@@ -32,14 +32,15 @@
 //!    and the count restarts at one (the body *moved* this frame). At more than [`SleepConfig::frames`]
 //!    a dynamic body falls asleep (a kinematic one never does, but standing still it wakes nobody): its
 //!    velocity is set to zero, and from then on it takes no gravity and no impulses and is not integrated
-//!    (the solver sees an infinitely heavy body, as a static one). Before the rows are built
-//!    (`crowd_wake`), every touching pair (at least one patch) with a sleeping body and a body that moved
-//!    last frame wakes the sleeper; it counts as one frame still with its old reference, so it wakes its
-//!    own neighbours only if it is then pushed out of its bounds. There are no islands: a body resting on
-//!    a sleeper stays awake until it too stays put. The state is two vec4 per body at the end of the
-//!    solver scratch (reference centre of mass and count, reference rotation); uploading a state or
-//!    resetting a world wakes its bodies. Sleepers still get contacts generated every frame (skipping
-//!    pairs of two sleepers would need the wake test before generation; not done).
+//!    (the solver sees an infinitely heavy body, as a static one). Before contact generation
+//!    (`crowd_wake`), every near pair (bounding spheres within the contact offset, 1.) of a sleeping body
+//!    and a body that moved last frame wakes the sleeper; it counts as one frame still with its old
+//!    reference, so it wakes its own neighbours only if it is then pushed out of its bounds. Then a pair
+//!    whose bodies all sleep (or a sleeper and a static shape) gets no jobs (`near_dormant`): no contacts,
+//!    no rows, so a pile that has gone to sleep costs little more than its near pairs and colouring. There
+//!    are no islands: a body resting on a sleeper stays awake until it too stays put. The state is two
+//!    vec4 per body at the end of the solver scratch (reference centre of mass and count, reference
+//!    rotation); uploading a state or resetting a world wakes its bodies.
 //!
 //! A world whose near pairs exceed [`CrowdConfig::max_pairs`], whose colouring needs more than
 //! [`CrowdConfig::max_colours`] colours or more than [`CrowdConfig::colour_rounds`] rounds, or whose
@@ -640,6 +641,16 @@ impl CrowdCpu {
             let mut order: Vec<usize> = (0..pairs.len()).filter(|&e| colours[e] < self.cfg.max_colours).collect();
             order.sort_by_key(|&e| (colours[e], e));
             let solve_pairs: Vec<NearPair> = order.iter().map(|&e| pairs[e]).collect();
+            let sleep = self.cfg.sleep;
+            let rest = &mut self.rest[w * n..(w + 1) * n];
+            if sleep.enabled() && !over {
+                // As the GPU, before contact generation and whether or not the colouring succeeds (it
+                // runs later there).
+                for np in pairs.iter().filter(|np| np.b != NO_BODY) {
+                    wake_by(rest, np.a as usize, np.b as usize, &sleep);
+                    wake_by(rest, np.b as usize, np.a as usize, &sleep);
+                }
+            }
             let mut frame = CrowdFrame { pairs, colours, colour_count, flags };
             if frame.flags != 0 {
                 // Not stepped (as on the GPU): no contacts, and no warm start for next frame.
@@ -655,7 +666,10 @@ impl CrowdCpu {
                 let wa = shape_world(&xf, n as u32, w as u32, np.a, t.a_pos, t.a_rot);
                 let wb = shape_world(&xf, n as u32, w as u32, np.b, t.b_pos, t.b_rot);
                 let job_first = self.world_flat.jobs.len() as u32;
-                for j in 0..t.job_count {
+                // A pair whose bodies all sleep gets no jobs (near.wgsl near_dormant).
+                let asleep = |b: u32| b == NO_BODY || rest[b as usize].asleep(&sleep);
+                let dormant = sleep.enabled() && asleep(np.a) && asleep(np.b);
+                for j in 0..if dormant { 0 } else { t.job_count } {
                     let bound = self.flat.job_bounds[(np.template * self.flat.jobs_per_pair + j) as usize];
                     if job_far_cpu(&record, &self.flat.flat.sdf_values, bound, &wa, &wb) {
                         continue;
@@ -684,27 +698,17 @@ impl CrowdCpu {
             let place: std::collections::HashMap<(u32, u32), usize> =
                 solve_pairs.iter().enumerate().map(|(k, p)| (key(p), k)).collect();
             warm.remap_pairs(|old| place.get(&key(&old_pairs[old])).copied());
-            let sleep = self.cfg.sleep;
-            let rest = &mut self.rest[range.clone()];
             let mut sleepers = None;
-            if sleep.enabled() {
-                for (k, np) in solve_pairs.iter().enumerate() {
-                    if np.b != NO_BODY && !contacts.patches[k].is_empty() {
-                        wake_by(rest, np.a as usize, np.b as usize, &sleep);
-                        wake_by(rest, np.b as usize, np.a as usize, &sleep);
+            if rest.iter().any(|r| r.asleep(&sleep)) {
+                // The solver sees a sleeper as a static body (as solve.wgsl's body_awake).
+                let mut m = self.bodies.clone();
+                for (b, r) in rest.iter().enumerate() {
+                    if r.asleep(&sleep) {
+                        m.body_inv_mass[b] = 0.0;
+                        m.body_inv_inertia[b] = glam::Mat3::ZERO;
                     }
                 }
-                if rest.iter().any(|r| r.asleep(&sleep)) {
-                    // The solver sees a sleeper as a static body (as solve.wgsl's body_awake).
-                    let mut m = self.bodies.clone();
-                    for (b, r) in rest.iter().enumerate() {
-                        if r.asleep(&sleep) {
-                            m.body_inv_mass[b] = 0.0;
-                            m.body_inv_inertia[b] = glam::Mat3::ZERO;
-                        }
-                    }
-                    sleepers = Some(m);
-                }
+                sleepers = Some(m);
             }
             let mut ws = BodyState {
                 body_q: state.body_q[range.clone()].to_vec(),

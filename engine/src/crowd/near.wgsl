@@ -11,6 +11,8 @@
 // body_class [body_count], body_rule [class_count^2], static_rule [static_count * class_count].
 @group(0) @binding(2) var<storage, read> rules: array<u32>;
 @group(1) @binding(0) var<storage, read> body_q: array<Transform>;
+// The solver scratch, read for the sleeping state only (solve.wgsl rest_index).
+@group(1) @binding(1) var<storage, read> solver_scratch: array<vec4<f32>>;
 @group(2) @binding(0) var<storage, read_write> crowd_pairs: array<Pair>;
 @group(2) @binding(1) var<storage, read_write> crowd_meta: array<atomic<u32>>;
 @group(2) @binding(2) var<storage, read_write> crowd_args: array<atomic<u32>>;
@@ -227,6 +229,28 @@ fn near_emit(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (k != end) {
         atomicOr(&crowd_meta[meta_base(w) + M_FLAGS], FLAG_RECOUNT);
     }
+}
+
+// Sleeping (crowd/mod.rs, 5.; dispatched after solve.wgsl's crowd_wake): a near pair whose bodies all sleep
+// (or whose one body sleeps beside a static shape) gets no jobs this frame, so no contacts and no rows: its
+// bodies take no impulses anyway.
+@compute @workgroup_size(64)
+fn near_dormant(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let e = gid.x;
+    let w = gid.y;
+    if (cp.sleep_frames == 0u || e >= min(load(meta_base(w) + M_COUNT), cp.cap)) {
+        return;
+    }
+    let g = w * cp.cap + e;
+    let a = crowd_pairs[g].body_a;
+    let b = crowd_pairs[g].body_b;
+    if (asleep(w, a) && (b == NONE || asleep(w, b))) {
+        crowd_pairs[g].job_count = 0u;
+    }
+}
+
+fn asleep(w: u32, b: u32) -> bool {
+    return solver_scratch[cp.rest_base + 2u * (w * cp.body_count + b)].w > f32(cp.sleep_frames);
 }
 
 // The list index of pair (i, j) (i < j), NONE if it was cut off.

@@ -10,8 +10,8 @@
 // built from last frame's, which stay in the other block; then the sleeping state, two vec4 per body
 // (rest_index).
 //
-// Sleeping (crowd/mod.rs, 5.; compiled in only when CrowdConfig::sleep is on): crowd_wake before the rows
-// are built, crowd_sleep after the last substep.
+// Sleeping (crowd/mod.rs, 5.; compiled in only when CrowdConfig::sleep is on): crowd_wake before contact
+// generation, crowd_sleep after the last substep.
 
 @group(0) @binding(0) var<uniform> sp: SolverParams;
 @group(0) @binding(1) var<uniform> cp: CrowdParams;
@@ -35,7 +35,7 @@ fn crowd_row(par: u32, w: u32, slot: u32) -> u32 {
 // count (a float): 0 no reference yet, 1 the reference was set this frame (the body moved), k + 1 still
 // for k frames, above cp.sleep_frames asleep (RestState in crowd/mod.rs).
 fn rest_index(g: u32) -> u32 {
-    return rows_base() + 2u * sp.world_count * cp.patch_budget * 4u * ROW + 2u * g;
+    return cp.rest_base + 2u * g;
 }
 
 fn rest_count(g: u32) -> f32 {
@@ -110,19 +110,21 @@ fn crowd_build_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
 }
 
-// A touching pair (at least one patch) wakes a sleeping body whose partner moved last frame; the woken
-// body counts as one frame still (2), so it wakes its own neighbours only if it is then pushed out of its
-// bounds. Pairs that wake the same body write the same value, and no pair reads a count this kernel
-// changes into or out of "moved" (<= 1): the result does not depend on the order of the invocations.
+// Dispatched in contact handling, after the near pairs and before contact generation: a near pair wakes a
+// sleeping body whose partner moved last frame; the woken body counts as one frame still (2), so it wakes
+// its own neighbours only if it is then pushed out of its bounds. Pairs that wake the same body write the
+// same value, and no pair reads a count this kernel changes into or out of "moved" (<= 1): the result does
+// not depend on the order of the invocations. (near.wgsl's near_dormant then takes the jobs of pairs
+// whose bodies all sleep.)
 @compute @workgroup_size(64)
 fn crowd_wake(@builtin(global_invocation_id) gid: vec3<u32>) {
     let e = gid.x;
     let w = gid.y;
-    if (!SLEEP || e >= crowd_meta[meta_base(w) + M_COUNT] || !ready(w)) {
+    if (!SLEEP || e >= min(crowd_meta[meta_base(w) + M_COUNT], cp.cap) || !ready(w)) {
         return;
     }
     let pair = pairs[w * cp.cap + e];
-    if (pair.body_b == NONE || crowd_meta[m_patch_count(w) + e] == 0u) {
+    if (pair.body_b == NONE) {
         return;
     }
     let ga = w * sp.body_count + pair.body_a;
