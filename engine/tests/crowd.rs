@@ -195,15 +195,27 @@ fn stacked_boxes() -> (CrowdModel, BodyModel, BodyState) {
     (model, bodies, at_rest(q))
 }
 
+/// One world on the GPU, started at `start`, and its CPU twin, at the parity tests' settings (16 patches per
+/// pair, 16 position iterations).
+fn pipe_and_twin(
+    model: &CrowdModel,
+    bodies: &BodyModel,
+    cfg: &CrowdConfig,
+    start: &BodyState,
+) -> (CrowdPipeline, CrowdCpu) {
+    let contact = ContactConfig { max_patches: 16, ..Default::default() };
+    let solver = SolverConfig { pos_iters: 16, ..Default::default() };
+    let pipe = CrowdPipeline::new(gpu(), model, bodies, 1, cfg, &contact, &solver).unwrap();
+    let cpu = CrowdCpu::new(model, bodies, cfg, &contact, &solver).unwrap();
+    pipe.write_state(gpu(), start);
+    (pipe, cpu)
+}
+
 #[test]
 fn coloured_gpu_step_matches_the_cpu_twin() {
     let (model, bodies, start) = stacked_boxes();
     let cfg = CrowdConfig::for_bodies(12);
-    let contact = ContactConfig { max_patches: 16, ..Default::default() };
-    let solver = SolverConfig { pos_iters: 16, ..Default::default() };
-    let pipe = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
-    let mut cpu = CrowdCpu::new(&model, &bodies, &cfg, &contact, &solver).unwrap();
-    pipe.write_state(gpu(), &start);
+    let (pipe, mut cpu) = pipe_and_twin(&model, &bodies, &cfg, &start);
     let mut state = start.clone();
     let (mut touching, mut cold, mut warm) = (0, Vec::new(), Vec::new());
     for frame in 0..LANDING + RESTING {
@@ -252,7 +264,7 @@ fn coloured_gpu_step_matches_the_cpu_twin() {
     assert!(touching >= 12, "the boxes rest on the table and on each other ({touching} pairs touching)");
     // Warm starting is at work: the same frame stepped cold from the same state ends elsewhere.
     let (now, _) = pipe.read_state(gpu());
-    let fresh = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
+    let fresh = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &pipe.contact, &pipe.solver).unwrap();
     fresh.write_state(gpu(), &now);
     fresh.submit_frame(gpu());
     pipe.submit_frame(gpu());
@@ -458,11 +470,7 @@ fn a_settled_stack_falls_asleep_alike_on_the_gpu_and_in_the_twin_and_a_pusher_wa
     start.body_qd.push([Vec3::new(PUSH_SPEED, 0.0, 0.0), Vec3::ZERO]);
     let sleep = SleepConfig { frames: SLEEP_FRAMES, distance: SLEEP_DISTANCE, angle: SLEEP_ANGLE };
     let cfg = CrowdConfig { sleep, ..CrowdConfig::for_bodies(N as u32 + 1) };
-    let contact = ContactConfig { max_patches: 16, ..Default::default() };
-    let solver = SolverConfig { pos_iters: 16, ..Default::default() };
-    let pipe = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
-    let mut cpu = CrowdCpu::new(&model, &bodies, &cfg, &contact, &solver).unwrap();
-    pipe.write_state(gpu(), &start);
+    let (pipe, mut cpu) = pipe_and_twin(&model, &bodies, &cfg, &start);
     let mut state = start.clone();
     let mut last = start.clone();
     let mut was_asleep = vec![false; N + 1];
