@@ -139,9 +139,9 @@ fn wake_by(g: u32, other: u32) {
     }
 }
 
-// After the last substep: an awake dynamic or kinematic body within the bounds of its reference pose counts one more
-// frame still (and falls asleep, its velocity zeroed, above cp.sleep_frames); otherwise its current pose
-// becomes the reference.
+// After the last substep: an awake dynamic or kinematic body within the bounds of its reference pose counts
+// one more frame still (and falls asleep, its velocity zeroed, above cp.sleep_frames); otherwise its current
+// pose becomes the reference.
 @compute @workgroup_size(64)
 fn crowd_sleep(@builtin(global_invocation_id) gid: vec3<u32>) {
     let b = gid.x;
