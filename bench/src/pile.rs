@@ -283,7 +283,8 @@ pub struct PileReport {
     pub final_moving_bodies: u32,
     /// Deepest contact at any frame start [mm] (positive: penetration) ...
     pub max_penetration_mm: f64,
-    /// ... and in each simulated second in turn [mm] (landing frames against a settled pile).
+    /// ... and in each simulated second in turn [mm] (landing frames against a settled pile). With
+    /// sleeping, pairs whose bodies all sleep have no contacts and do not count: a pile asleep reports 0.
     pub max_penetration_per_second_mm: Vec<f64>,
     /// Every pose and velocity stayed finite.
     pub finite: bool,
