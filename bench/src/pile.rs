@@ -354,7 +354,6 @@ struct Tally {
     e0: f64,
     top: f64,
     released: f64,
-    wall: f64,
     /// Wall time of each frame [s].
     frame_walls: Vec<f64>,
     max_speed: f64,
@@ -378,8 +377,12 @@ struct Tally {
 impl Tally {
     /// A frame's wall time [s].
     fn add_wall(&mut self, secs: f64) {
-        self.wall += secs;
         self.frame_walls.push(secs);
+    }
+
+    /// Wall time of the frames so far [s].
+    fn wall(&self) -> f64 {
+        self.frame_walls.iter().sum()
     }
 
     fn new(scene: &PileScene, run: &PileRun, state: &BodyState) -> Self {
@@ -392,7 +395,6 @@ impl Tally {
             e0,
             top: start_com[..n].iter().map(|c| c.z).fold(0.0f32, f32::max) as f64,
             released: start_com[..n].iter().map(|c| c.z as f64).sum::<f64>() * scene.g(),
-            wall: 0.0,
             frame_walls: Vec::new(),
             max_speed: 0.0,
             max_energy: e0,
@@ -507,6 +509,7 @@ fn report(
 ) -> PileReport {
     let n = t.n;
     let sim = t.frames as f64 * run.solver.dt as f64;
+    let wall = t.wall();
     let end = coms(scene, &t.last);
     let pile_height = end[..n].iter().map(|c| c.z).fold(0.0f32, f32::max);
     // The farthest any centre of mass moved over the last second: (body, distance [m]).
@@ -532,8 +535,8 @@ fn report(
         touching_pairs: c.touching,
         resting_body_pairs: c.resting_body_pairs,
         pile_height_mm: pile_height as f64 * 1e3,
-        wall_s: t.wall,
-        ms_per_frame: t.wall * 1e3 / t.frames as f64,
+        wall_s: wall,
+        ms_per_frame: wall * 1e3 / t.frames as f64,
         ms_per_frame_per_second: t
             .frame_walls
             .chunks(per_second)
@@ -541,8 +544,8 @@ fn report(
             .collect(),
         handling_ms_per_frame: handling_ms,
         solve_ms_per_frame: solve_ms,
-        real_time_factor_per_world: sim / t.wall,
-        body_seconds_per_wall_second: (run.bodies * run.worlds) as f64 * sim / t.wall,
+        real_time_factor_per_world: sim / wall,
+        body_seconds_per_wall_second: (run.bodies * run.worlds) as f64 * sim / wall,
         max_speed_m_s: t.max_speed,
         free_fall_speed_m_s: (2.0 * scene.g() * t.top).sqrt(),
         energy_bound_speed_m_s: (2.0 * t.released).sqrt(),
@@ -650,7 +653,7 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
                 f + 1,
                 t.frames,
                 near0,
-                t.wall * 1e3 / (f + 1) as f64,
+                t.wall() * 1e3 / (f + 1) as f64,
                 fastest_bodies(scene, &s, t.n, 1),
                 asleep_now()
             );
@@ -670,15 +673,10 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
             .filter(|(np, ps)| np.b != NO_BODY && ps.iter().any(|p| p.contacts.iter().any(|k| k.depth <= 0.5e-3)))
             .count() as u64
     };
-    let mut resting_body_pairs = resting(&pipe);
-    // After the last frame's figures are read: it steps the pile on.
-    let woken = if run.sleep.enabled() {
-        let w = woken_drift(gpu, &pipe, scene, t.n);
-        resting_body_pairs = resting(&pipe);
-        Some(w)
-    } else {
-        None
-    };
+    // After the last frame's figures are read: it steps the pile on (and the resting pairs are counted
+    // after it, every body awake).
+    let woken = run.sleep.enabled().then(|| woken_drift(gpu, &pipe, scene, t.n));
+    let resting_body_pairs = resting(&pipe);
     let c = LastContacts {
         candidates: stats.iter().map(|s| s.candidates).sum(),
         contacts: stats.iter().map(|s| s.contacts as u64).sum(),

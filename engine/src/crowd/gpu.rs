@@ -138,8 +138,12 @@ pub struct CrowdPipeline {
 /// Byte offset of the sleeping state in a crowd's scratch buffer: after the status, the wrenches and the two
 /// blocks of rows (solve.wgsl's rest_index).
 fn rest_offset(world_count: u32, body_count: u32, cfg: &CrowdConfig) -> u64 {
-    let rows_vec4 = 2 * world_count as u64 * cfg.max_patches_per_world as u64 * 4 * crate::solver::gpu::ROW_VEC4;
-    crate::solver::gpu::rows_offset(world_count, body_count) + rows_vec4 * 16
+    crate::solver::gpu::rows_offset(world_count, body_count) + 2 * world_count as u64 * world_rows_bytes(cfg)
+}
+
+/// Bytes of one world's rows in one of the scratch buffer's two blocks.
+fn world_rows_bytes(cfg: &CrowdConfig) -> u64 {
+    cfg.max_patches_per_world as u64 * 4 * crate::solver::gpu::ROW_VEC4 * 16
 }
 
 fn too_large(gpu: &GpuContext, what: String, bytes: u64, hint: &str) -> Result<()> {
@@ -458,7 +462,7 @@ impl CrowdPipeline {
         assert!(body_q.len() == n && body_qd.len() == n, "one world's bodies: shape [body_count = {n}]");
         crate::solver::gpu::write_world_bodies(gpu, &self.body_q, &self.body_qd, world, body_q, body_qd);
         let (w, wc) = (world as u64, self.world_count as u64);
-        let rows = self.cfg.max_patches_per_world as u64 * 4 * crate::solver::gpu::ROW_VEC4 * 16;
+        let rows = world_rows_bytes(&self.cfg);
         let rows_offset = crate::solver::gpu::rows_offset(self.world_count, self.body_count);
         let stride = self.params.meta_stride as u64 * 4;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
