@@ -3,15 +3,18 @@
 # "Contact handling on lavapipe: what costs"): M16 nut-bolt, coarse nut (48 segments per turn, 4 descent
 # iterations), analytic bolt SDF, W worlds, 10 frames per run, R rounds.
 # Usage: scripts/bench_contacts_ab.sh R W OUT.jsonl BIN...  (BIN: factory-bench binaries built at the commits
-# compared). Prints the minimum and median handling ms per frame of each build.
+# compared, each optionally followed by '|' and extra options, e.g. 'target/release/factory-bench|--per 4').
+# Prints the minimum and median handling ms per frame of each build.
 set -euo pipefail
 rounds=$1 worlds=$2 out=$3
 shift 3
 : > "$out"
 for _ in $(seq "$rounds"); do
-  for bin in "$@"; do
-    "$bin" contacts --sdf analytic --segments-per-turn 48 --descent-iters 4 --worlds "$worlds" --frames 10 --json 2>/dev/null |
-      python3 -c "import json,sys; d=json.load(sys.stdin); print(json.dumps({'build': sys.argv[1], **d}))" "$bin" >> "$out"
+  for spec in "$@"; do
+    IFS='|' read -r bin extra <<< "$spec"
+    # shellcheck disable=SC2086
+    "$bin" contacts --sdf analytic --segments-per-turn 48 --descent-iters 4 --worlds "$worlds" --frames 10 $extra --json 2>/dev/null |
+      python3 -c "import json,sys; d=json.load(sys.stdin); print(json.dumps({'build': sys.argv[1], **d}))" "$spec" >> "$out"
   done
 done
 python3 - "$out" <<'PY'

@@ -115,6 +115,10 @@ struct SceneArgs {
     /// Projected-gradient iterations per query triangle.
     #[arg(long, default_value_t = 12)]
     descent_iters: u32,
+    /// Candidates per invocation of the contact kernels (1, 2 or 4; ContactConfig::candidates_per_invocation:
+    /// 4 is faster on lavapipe and keeps other contacts, see docs/BENCHMARKS.md).
+    #[arg(long, default_value_t = 1)]
+    per: u32,
     /// Thread columns per turn of the generated nut and bolt meshes (multiple of 12, >= 24).
     #[arg(long, default_value_t = 192)]
     segments_per_turn: usize,
@@ -251,6 +255,9 @@ enum Cmd {
         /// Invocations per contact workgroup (32, 64, 128, 256).
         #[arg(long, default_value_t = 64)]
         workgroup: u32,
+        /// Candidates per invocation (1, 2 or 4; at most 256 per workgroup; ContactConfig::candidates_per_invocation).
+        #[arg(long, default_value_t = 1)]
+        per: u32,
         /// Projected-gradient iterations per query triangle.
         #[arg(long, default_value_t = 12)]
         descent_iters: u32,
@@ -296,6 +303,7 @@ fn main() -> Result<()> {
                 contact: ContactConfig {
                     max_patches: args.patches.unwrap_or(16),
                     iterations: args.descent_iters,
+                    candidates_per_invocation: args.per,
                     ..Default::default()
                 },
                 solver: args.solver(&kind.paper_solver()),
@@ -334,6 +342,7 @@ fn main() -> Result<()> {
                 contact: ContactConfig {
                     max_patches: args.patches.unwrap_or(64),
                     iterations: args.descent_iters,
+                    candidates_per_invocation: args.per,
                     ..Default::default()
                 },
                 solver: args.solver(&paper),
@@ -419,6 +428,7 @@ fn main() -> Result<()> {
             patches,
             normal_deg,
             workgroup,
+            per,
             descent_iters,
             segments_per_turn,
             offset_mm,
@@ -480,6 +490,7 @@ fn main() -> Result<()> {
                 max_patches: patches,
                 normal_cos: normal_deg.to_radians().cos(),
                 workgroup_size: workgroup,
+                candidates_per_invocation: per,
                 iterations: descent_iters,
                 ..Default::default()
             };
@@ -529,6 +540,7 @@ fn main() -> Result<()> {
                 "max_patches": patches,
                 "normal_bin_deg": normal_deg,
                 "workgroup_size": workgroup,
+                "candidates_per_invocation": per,
                 "descent_iters": descent_iters,
                 "contact_offset_mm": offset_mm,
                 "lift_mm": lift * 1e3,

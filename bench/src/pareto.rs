@@ -831,6 +831,7 @@ mod tests {
             sdf: "analytic".into(),
             max_patches: patches,
             descent_iters: 12,
+            candidates_per_invocation: 1,
             segments_per_turn: 192,
             query_triangles: 11512,
             mu: 0.0,

@@ -233,6 +233,8 @@ pub struct PileReport {
     #[serde(flatten)]
     pub solver: SolverColumns,
     pub max_patches: u32,
+    /// Candidates per invocation of the contact kernels (ContactConfig::candidates_per_invocation).
+    pub candidates_per_invocation: u32,
     pub mu: f32,
     /// Last frame, summed over worlds: contact candidates before reduction, contacts after it, patches,
     /// and pairs with at least one patch.
@@ -528,6 +530,7 @@ fn report(
         colours: c.colours,
         solver: (&run.solver).into(),
         max_patches: run.contact.max_patches,
+        candidates_per_invocation: run.contact.candidates_per_invocation,
         mu: run.mu,
         contacts_before: c.candidates,
         contacts_after: c.contacts,

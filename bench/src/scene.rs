@@ -49,6 +49,8 @@ pub struct NutBoltReport {
     pub max_patches: u32,
     /// Projected-gradient iterations per query triangle.
     pub descent_iters: u32,
+    /// Candidates per invocation of the contact kernels (ContactConfig::candidates_per_invocation).
+    pub candidates_per_invocation: u32,
     pub segments_per_turn: usize,
     /// Query (nut) triangles per pair.
     pub query_triangles: usize,
@@ -140,6 +142,7 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         sdf: run.sdf_resolution.map_or("analytic".into(), |r| format!("grid {r}")),
         max_patches: run.contact.max_patches,
         descent_iters: run.contact.iterations,
+        candidates_per_invocation: run.contact.candidates_per_invocation,
         segments_per_turn: run.segments_per_turn,
         query_triangles: nb.nut.mesh.triangle_count(),
         mu: run.mu,

@@ -238,8 +238,8 @@ fn shell_soup(n: u32, r: f32, mut seed: u64) -> Vec<[Vec3; 3]> {
 fn longest_jobs_and_most_jobs_per_pair_lose_no_candidates_to_the_loop_limit() {
     let r = 0.05;
     let grid = Arc::new(sphere_grid(r, 48));
-    for (workgroup_size, max_patches) in [(64, 64), (256, 64), (32, 256)] {
-        let base = ContactConfig { workgroup_size, max_patches, ..Default::default() };
+    for (workgroup_size, per, max_patches) in [(64, 4, 64), (64, 1, 64), (256, 1, 64), (32, 4, 256)] {
+        let base = ContactConfig { workgroup_size, max_patches, candidates_per_invocation: per, ..Default::default() };
         let longest = base.max_chunk_triangles();
         let most_jobs = base.max_jobs_per_pair();
         assert!(longest >= 256 && most_jobs >= 1, "{base:?}");
@@ -327,8 +327,10 @@ fn jobs_that_overflow_their_patch_budget_are_redone_with_eviction() {
     let model = soup_vs_grid(shell_soup(3000, r, 0x9E3779B97F4A7C15), grid);
     let worlds = 3;
     let poses = turned_poses(worlds);
-    for (max_patches, overflowing) in [(16, 3 * worlds), (256, 0)] {
-        let cfg = ContactConfig { max_patches, chunk_triangles: 1024, ..Default::default() };
+    // (A budget of 256 with batches of 256 needs more than lavapipe's 32 KiB of workgroup memory.)
+    for (max_patches, per, overflowing) in [(16, 4, 3 * worlds), (16, 1, 3 * worlds), (256, 2, 0)] {
+        let cfg =
+            ContactConfig { max_patches, chunk_triangles: 1024, candidates_per_invocation: per, ..Default::default() };
         let pipe = ContactPipeline::new(g, &model, worlds, &cfg).unwrap();
         assert_eq!(pipe.flat.jobs.len(), 3, "{cfg:?}");
         pipe.write_body_q(g, &poses);

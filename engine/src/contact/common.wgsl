@@ -8,8 +8,17 @@
 // The host appends reduce_plain.wgsl or, where the device has subgroup operations, reduce_subgroup.wgsl:
 // lanes_init, best_patch and the combine_* helpers (same results either way).
 //
-// Workgroup size = candidates per batch, substituted by the host (ContactConfig::workgroup_size: 32, 64,
-// 128 or 256; the CPU twin cuts its batches to the same size).
+// Workgroup size WG and candidates per invocation PER, substituted by the host (ContactConfig::workgroup_size:
+// 32, 64, 128 or 256; ContactConfig::candidates_per_invocation: 1, 2 or 4); a batch holds BATCH = WG * PER
+// candidates, invocation lid holding candidates lid * PER .. lid * PER + PER - 1 (the CPU twin cuts its
+// batches to the same size).
+//
+// Why several candidates per invocation: lavapipe runs every workgroup-memory instruction lane by lane
+// (below), so the reduction's cost is its memory instructions per lane. An invocation holding PER
+// candidates reads the patch normals once for all of them in Assign, posts once per round, and in the slot
+// rounds reads a patch's slots once for all its candidates in that patch (a loop over the distinct patches
+// of its candidates, usually one: the query triangles are ordered by normal, model.rs). On a GPU it trades
+// parallelism within a workgroup, which the worlds supply, for fewer barriers per candidate.
 //
 // Loops: lavapipe (llvmpipe) gives each shader invocation ONE loop counter shared by all its loops,
 // 65535 back edges in total (LP_MAX_TGSI_LOOP_ITERATIONS); past it every loop exits after one pass and
@@ -17,7 +26,14 @@
 // kept short (Assign unrolled by 4, no per-patch loop on one lane) and the host bounds the batches per
 // workgroup from a worst-case count of these loops (ContactConfig::max_chunk_triangles,
 // max_jobs_per_pair): keep that count in step with every loop added here.
+// And llvmpipe tests a loop's exit only at its back edge: a loop whose exit test sits at the top of the body
+// (every `for` and `while`) runs the whole body once more, every lane masked off, after its last pass (only
+// memory accesses are skipped, lane by lane). The per-batch and per-triangle loops here therefore test at
+// the end of the pass (do-while; the two SDF samples this saved per triangle of the nut-bolt pair and the
+// batch loop's extra pass: contact handling about 1.1x faster, 2026-12-03, docs/BENCHMARKS.md).
 const WG: u32 = WG_VALUE;
+const PER: u32 = PER_VALUE;
+const BATCH: u32 = WG_VALUE * PER_VALUE;
 // Patch budget per pair, substituted by the host when the pipeline is built (16..256).
 const MAX_PATCHES: u32 = MAX_PATCHES_VALUE;
 const PATCH_CAP: u32 = MAX_PATCHES_VALUE + 1u; // + one temporary patch for AddPatch when full
@@ -127,8 +143,8 @@ fn ordered(f: f32) -> u32 {
 
 // The batch (stored by reduce_batch). Other invocations' entries are last read by AddPatch, before the barriers of
 // the batch's last round, so the next batch may overwrite them at once.
-var<workgroup> cand_pd: array<vec4<f32>, WG>;           // point xyz, depth w (EMPTY: no candidate)
-var<workgroup> cand_n: array<vec4<f32>, WG>;            // unit normal xyz, area units w
+var<workgroup> cand_pd: array<vec4<f32>, BATCH>;        // point xyz, depth w (EMPTY: no candidate)
+var<workgroup> cand_n: array<vec4<f32>, BATCH>;         // unit normal xyz, area units w
 // Patch p: seed normal xyz at patch_data[pd_normal(p)], slot k (point xyz, depth w) at pd_slot(p, k); member
 // area [area units] at patch_ak[2p], slot 0's key (members post during Assign/AddPatch) at patch_ak[2p + 1].
 // Interleaved so that one instruction moves or resets a whole patch: lavapipe runs every workgroup-memory
@@ -236,14 +252,95 @@ fn measure(p: u32, offset: f32) -> f32 {
 // workgroup that the batch has members and needs the slot rounds.
 const ASSIGNED_ONLY: u32 = 0x200u;
 
+// An invocation's PER candidates, component j of each vector holding candidate lid * PER + j of the batch
+// (components j >= PER: none). Point in the SDF shape's frame [m], depth [m] (EMPTY: no candidate), unit
+// normal, area units. Vectors across candidates rather than an array of records: private values at
+// constant indices stay in registers on lavapipe, and Assign's and AddPatch's tests run on all at once.
+struct Cands {
+    px: vec4<f32>,
+    py: vec4<f32>,
+    pz: vec4<f32>,
+    depth: vec4<f32>,
+    nx: vec4<f32>,
+    ny: vec4<f32>,
+    nz: vec4<f32>,
+    units: vec4<f32>,
+}
+
+const LANES4: vec4<u32> = vec4<u32>(0u, 1u, 2u, 3u);
+
+fn cands_empty() -> Cands {
+    let z = vec4<f32>(0.0);
+    return Cands(z, z, z, vec4<f32>(EMPTY), z, z, z, z);
+}
+
+// Candidate j (0..PER) of *c becomes (pd: point xyz, depth w; n: unit normal xyz, area units w).
+fn cands_set(c: ptr<function, Cands>, j: u32, pd: vec4<f32>, n: vec4<f32>) {
+    let m = LANES4 == vec4<u32>(j);
+    (*c).px = select((*c).px, vec4<f32>(pd.x), m);
+    (*c).py = select((*c).py, vec4<f32>(pd.y), m);
+    (*c).pz = select((*c).pz, vec4<f32>(pd.z), m);
+    (*c).depth = select((*c).depth, vec4<f32>(pd.w), m);
+    (*c).nx = select((*c).nx, vec4<f32>(n.x), m);
+    (*c).ny = select((*c).ny, vec4<f32>(n.y), m);
+    (*c).nz = select((*c).nz, vec4<f32>(n.z), m);
+    (*c).units = select((*c).units, vec4<f32>(n.w), m);
+}
+
+fn cands_pd(c: Cands, j: u32) -> vec4<f32> {
+    return vec4<f32>(c.px[j], c.py[j], c.pz[j], c.depth[j]);
+}
+
+fn cands_n(c: Cands, j: u32) -> vec4<f32> {
+    return vec4<f32>(c.nx[j], c.ny[j], c.nz[j], c.units[j]);
+}
+
+fn ordered4(f: vec4<f32>) -> vec4<u32> {
+    return vec4<u32>(ordered(f.x), ordered(f.y), ordered(f.z), ordered(f.w));
+}
+
+fn max4(v: vec4<u32>) -> u32 {
+    return max(max(v.x, v.y), max(v.z, v.w));
+}
+
+fn sum4(v: vec4<u32>) -> u32 {
+    return (v.x + v.y) + (v.z + v.w);
+}
+
+// The first j with v[j] (v has at least one).
+fn first_of(v: vec4<bool>) -> u32 {
+    return select(select(select(3u, 2u, v.z), 1u, v.y), 0u, v.x);
+}
+
+// One patch of an invocation's candidates: patch p and which candidates are in it.
+struct Group {
+    p: u32,
+    sel: vec4<bool>,
+}
+
+// The patch of the first candidate still in *todo, with all of *todo's candidates in it, which leave *todo.
+// Callers loop `loop { let g = next_group(&todo, mine); if (any(g.sel)) { ... } if (!any(todo)) { break; } }`:
+// one pass per distinct patch of the invocation's candidates, at least one (counted in
+// ContactConfig::reduce_batch_loops). The exit test ends the pass: lavapipe runs a loop's body once more,
+// masked, after a pass that ends with the test at the top (see the note on loops above).
+fn next_group(todo: ptr<function, vec4<bool>>, mine: vec4<u32>) -> Group {
+    let t = *todo;
+    let p = mine[first_of(t)];
+    let sel = t & (mine == vec4<u32>(p));
+    *todo = t & !sel;
+    return Group(p, sel);
+}
+
 // FindDeepest of round *round of reduce_batch: every unbinned candidate posts its key (in round 0 a binned
 // one posts ASSIGNED_ONLY), and the workgroup reads the largest (a barrier). Zeroes the next round's buffer,
 // counts the round, and after round 0 sets *any_member (the batch has a candidate at all).
-fn find_deepest(lid: u32, mine: u32, my_key0: u32, round: ptr<function, u32>, any_member: ptr<function, bool>) -> u32 {
+fn find_deepest(lid: u32, mine: vec4<u32>, key0: vec4<u32>, round: ptr<function, u32>, any_member: ptr<function, bool>) -> u32 {
     let b = red_round & 1u;
     red_round += 1u;
     let first = *round == 0u;
-    let post = combine_max(select(select(0u, ASSIGNED_ONLY, first && mine != NONE), my_key0, mine == UNASSIGNED));
+    let binned = select(vec4<bool>(false), mine != vec4<u32>(NONE), first);
+    let each = select(select(vec4<u32>(0u), vec4<u32>(ASSIGNED_ONLY), binned), key0, mine == vec4<u32>(UNASSIGNED));
+    let post = combine_max(max4(each));
     if (post != 0u) {
         atomicMax(&wg_best[b], post);
     }
@@ -259,8 +356,8 @@ fn find_deepest(lid: u32, mine: u32, my_key0: u32, round: ptr<function, u32>, an
 }
 
 // AddPatch and BinReduce: opens patch idx seeded by the candidate of key `best` and bins this invocation's
-// candidate into it if unbinned and its normal is similar (every invocation calls it).
-fn add_patch(lid: u32, best: u32, idx: u32, my_n: vec3<f32>, units: u32, my_key0: u32, normal_cos: f32, mine: ptr<function, u32>) {
+// candidates into it if unbinned and their normals are similar (every invocation calls it).
+fn add_patch(lid: u32, best: u32, idx: u32, c: Cands, units: vec4<u32>, key0: vec4<u32>, normal_cos: f32, mine: ptr<function, vec4<u32>>) {
     let seed = (best & IDX_MASK) - 1u;
     let seed_n = cand_n[seed].xyz;
     if (lid < 5u) {
@@ -268,12 +365,12 @@ fn add_patch(lid: u32, best: u32, idx: u32, my_n: vec3<f32>, units: u32, my_key0
         var v = select(vec4<f32>(0.0, 0.0, 0.0, EMPTY), cand_pd[seed], lid == 1u);
         patch_data[pd_normal(idx) + lid] = select(v, vec4<f32>(seed_n, 0.0), lid == 0u);
     }
-    let joins = *mine == UNASSIGNED && dot(my_n, seed_n) >= normal_cos;
-    if (joins) {
-        *mine = idx;
-    }
-    let add = combine_add(select(0u, units, joins));
-    let key = combine_max(select(0u, my_key0, joins));
+    // dot(n, seed_n) per candidate, in dot's order.
+    let d = c.nx * seed_n.x + c.ny * seed_n.y + c.nz * seed_n.z;
+    let joins = (*mine == vec4<u32>(UNASSIGNED)) & (d >= vec4<f32>(normal_cos));
+    *mine = select(*mine, vec4<u32>(idx), joins);
+    let add = combine_add(sum4(select(vec4<u32>(0u), units, joins)));
+    let key = combine_max(max4(select(vec4<u32>(0u), key0, joins)));
     if (add != 0u) {
         atomicAdd(&patch_ak[ak_area(idx)], add);
         atomicMax(&patch_ak[ak_key0(idx)], key);
@@ -284,7 +381,7 @@ fn add_patch(lid: u32, best: u32, idx: u32, my_n: vec3<f32>, units: u32, my_key0
 // the one of least measure goes: one atomic arg-min over keys ordered(measure) | code, code p + 1 for an
 // existing patch (the lowest index wins a tie) and 0 for the new one (it loses ties: it replaces a patch
 // only when it measures more). Updates this invocation's `mine`.
-fn evict(lid: u32, offset: f32, mine: ptr<function, u32>) {
+fn evict(lid: u32, offset: f32, mine: ptr<function, vec4<u32>>) {
     workgroupBarrier(); // members' areas added
     var vkey = NONE;
     for (var p = lid; p <= MAX_PATCHES; p += WG) {
@@ -312,23 +409,19 @@ fn evict(lid: u32, offset: f32, mine: ptr<function, u32>) {
     if (lid == 7u) {
         atomicStore(&wg_victim, NONE);
     }
-    if (*mine == MAX_PATCHES) {
-        *mine = victim;
-    } else if (*mine == victim) {
-        *mine = NONE;
-    }
+    let m = *mine;
+    *mine = select(select(m, vec4<u32>(NONE), m == vec4<u32>(victim)), vec4<u32>(victim), m == vec4<u32>(MAX_PATCHES));
 }
 
-// Reduces a batch into the workgroup's patch list: this invocation's candidate is `my` (point xyz, depth w;
-// EMPTY depth: none) with `my_n` (unit normal xyz, area units w); `pc0` is the patch count
-// before the batch (workgroup-uniform; the caller keeps it) and the count after it is returned. Every
-// invocation must call it. The caller must barrier before reading the patch list.
+// Reduces a batch into the workgroup's patch list: this invocation's candidates are `c` (Cands; depth EMPTY:
+// none); `pc0` is the patch count before the batch (workgroup-uniform; the caller keeps it) and the count
+// after it is returned. Every invocation must call it. The caller must barrier before reading the patch list.
 //
 // Barriers serialise warps on a GPU, so each step is placed to need as few as possible (a batch that opens
 // no patch costs 9: 2 for its one FindDeepest round, 2 per slot round and 1 after the last). On lavapipe
 // they cost next to nothing (measured 2026-12-02: what costs there is every memory instruction, run lane by
 // lane, and every branch's body, run masked whether taken or not; see docs/BENCHMARKS.md):
-// - no barrier at entry: Assign reads only this invocation's candidate and the patch normals and slot 0s,
+// - no barrier at entry: Assign reads only this invocation's candidates and the patch normals and slot 0s,
 //   which the previous batch last wrote before a barrier; candidates of other invocations are read only
 //   after the first round's workgroupUniformLoad;
 // - the seed's normal is read from cand_n (stable during the batch), so binning needs no barrier after
@@ -340,33 +433,48 @@ fn evict(lid: u32, offset: f32, mine: ptr<function, u32>) {
 // - wg_best is double-buffered: the buffer of round i+1 is zeroed during round i, before the barrier that
 //   ends every read of it from round i-1, so a round costs one workgroupUniformLoad (2 barriers), plus 3
 //   when the budget is full and a victim must be chosen (one atomic arg-min over the patches, `evict`);
-// - the slot rounds are the members' work, each on its own patch (2 barriers per round, one at the end),
-//   and a batch whose invocations have no candidate skips them (on a GPU; lavapipe runs them masked).
+// - the slot rounds are the members' work, each invocation on the patches of its candidates (2 barriers
+//   per round, one at the end), and a batch whose invocations have no candidate skips them (on a GPU;
+//   lavapipe runs them masked).
 //
 // `evicting`, a constant at every call site (lavapipe and GPU compilers inline the call and drop the other
 // branch): false leaves out the eviction rounds, whose code lavapipe would otherwise run, masked, in every
 // batch (15% of the nut-bolt pair's contact handling, which never fills its budget); such a batch sets
 // red_overflow and stops where a patch would have to go.
-fn reduce_batch(lid: u32, my: vec4<f32>, my_n: vec4<f32>, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32, evicting: bool) -> u32 {
+fn reduce_batch(lid: u32, c: Cands, pc0: u32, normal_cos: f32, offset: f32, min_sep: f32, evicting: bool) -> u32 {
     // Others read these (AddPatch) only after the first round's barrier; this invocation uses its own from
     // registers.
-    cand_pd[lid] = my;
-    cand_n[lid] = my_n;
-    // Assign: the most similar existing patch above the threshold.
-    let units = u32(my_n.w);
-    let my_key0 = ordered(-my.w) | (lid + 1u);
-    let found = best_patch(my_n.xyz, pc0, normal_cos); // every invocation: best_patch may use subgroups
-    var mine = NONE;
-    if (my.w < VALID_BELOW) {
-        mine = found;
-        if (mine != UNASSIGNED) {
-            // Slot 0's arg-max over its current contact (code 0) and the members (see the slot rounds).
-            atomicAdd(&patch_ak[ak_area(mine)], units);
-            atomicMax(&patch_ak[ak_key0(mine)], max(my_key0, slot0_key(patch_data[pd_slot(mine, 0u)])));
+    let first = lid * PER;
+    var j = 0u;
+    loop {
+        cand_pd[first + j] = cands_pd(c, j);
+        cand_n[first + j] = cands_n(c, j);
+        j += 1u;
+        if (j >= PER) {
+            break;
         }
     }
-    // New patches: FindDeepest, BinReduce, AddPatch until every candidate is binned. `mine` is this
-    // candidate's patch index, UNASSIGNED or NONE; only its own invocation needs it. Two loops: rounds while
+    let valid = c.depth < vec4<f32>(VALID_BELOW);
+    let units = vec4<u32>(c.units);
+    let code = vec4<u32>(first + 1u) + LANES4;
+    let key0 = ordered4(-c.depth) | code;
+    // Assign: the most similar existing patch above the threshold.
+    let found = best_patch(c, pc0, normal_cos); // every invocation: best_patch may use subgroups
+    var mine = select(vec4<u32>(NONE), found, valid);
+    // Slot 0's arg-max over its current contact (code 0) and the members (see the slot rounds), per patch.
+    var todo = valid & (mine != vec4<u32>(UNASSIGNED));
+    loop {
+        let g = next_group(&todo, mine);
+        if (any(g.sel)) {
+            atomicAdd(&patch_ak[ak_area(g.p)], sum4(select(vec4<u32>(0u), units, g.sel)));
+            atomicMax(&patch_ak[ak_key0(g.p)], max(max4(select(vec4<u32>(0u), key0, g.sel)), slot0_key(patch_data[pd_slot(g.p, 0u)])));
+        }
+        if (!any(todo)) {
+            break;
+        }
+    }
+    // New patches: FindDeepest, BinReduce, AddPatch until every candidate is binned. `mine` holds these
+    // candidates' patch indices, UNASSIGNED or NONE; only this invocation needs it. Two loops: rounds while
     // the budget has room, then rounds that evict: lavapipe runs a loop's body, masked, at least once, and
     // every branch's body, so with the eviction in the one loop every round paid for it.
     var pc = pc0;
@@ -374,11 +482,11 @@ fn reduce_batch(lid: u32, my: vec4<f32>, my_n: vec4<f32>, pc0: u32, normal_cos: 
     var best = 0u;
     var any_member = false;
     loop {
-        best = find_deepest(lid, mine, my_key0, &round, &any_member);
+        best = find_deepest(lid, mine, key0, &round, &any_member);
         if (best <= IDX_MASK || pc >= MAX_PATCHES) {
             break;
         }
-        add_patch(lid, best, pc, my_n.xyz, units, my_key0, normal_cos, &mine);
+        add_patch(lid, best, pc, c, units, key0, normal_cos, &mine);
         pc += 1u;
     }
     // Budget full and candidates left: each new patch goes to index MAX_PATCHES; of the existing patches
@@ -389,9 +497,9 @@ fn reduce_batch(lid: u32, my: vec4<f32>, my_n: vec4<f32>, pc0: u32, normal_cos: 
             return pc;
         }
         loop {
-            add_patch(lid, best, MAX_PATCHES, my_n.xyz, units, my_key0, normal_cos, &mine);
+            add_patch(lid, best, MAX_PATCHES, c, units, key0, normal_cos, &mine);
             evict(lid, offset, &mine);
-            best = find_deepest(lid, mine, my_key0, &round, &any_member);
+            best = find_deepest(lid, mine, key0, &round, &any_member);
             if (best <= IDX_MASK) {
                 break;
             }
@@ -406,69 +514,118 @@ fn reduce_batch(lid: u32, my: vec4<f32>, my_n: vec4<f32>, pc0: u32, normal_cos: 
     // the larger of its own key and the current contact's (code 0: keep it), and the winner writes its
     // point. The patches written above and every slot-0 post are visible: the last workgroupUniformLoad
     // of the loops was a barrier.
-    let member = mine < MAX_PATCHES;
-    if (member) {
-        let key = atomicLoad(&patch_ak[ak_key0(mine)]);
-        if ((key & IDX_MASK) == lid + 1u) {
-            patch_data[pd_slot(mine, 0u)] = my;
+    let member = mine < vec4<u32>(MAX_PATCHES);
+    todo = member;
+    loop {
+        let g = next_group(&todo, mine);
+        if (any(g.sel)) {
+            let hit = g.sel & (code == vec4<u32>(atomicLoad(&patch_ak[ak_key0(g.p)]) & IDX_MASK));
+            if (any(hit)) {
+                patch_data[pd_slot(g.p, 0u)] = cands_pd(c, first_of(hit));
+            }
+        }
+        if (!any(todo)) {
+            break;
         }
     }
     // Written out with a constant k each: lavapipe runs both sides of every branch, so slot_metric with a
     // loop's k paid for every slot's reads.
     let band = DEPTH_BAND * offset;
-    slot_round(1u, lid, mine, my, min_sep, band);
-    slot_round(2u, lid, mine, my, min_sep, band);
-    slot_round(3u, lid, mine, my, min_sep, band);
+    slot_round(1u, mine, c, code, min_sep, band);
+    slot_round(2u, mine, c, code, min_sep, band);
+    slot_round(3u, mine, c, code, min_sep, band);
     workgroupBarrier(); // every member has read slot 3's key
-    if (member) {
-        atomicStore(&slot_keys[key_of(3u, mine)], 0u);
+    todo = member;
+    loop {
+        let g = next_group(&todo, mine);
+        if (any(g.sel)) {
+            atomicStore(&slot_keys[key_of(3u, g.p)], 0u);
+        }
+        if (!any(todo)) {
+            break;
+        }
     }
     return pc;
 }
 
+// The largest slot-k key of the candidates of `sel` (all in one patch with slots s0, s1, s2), 0 if none is
+// eligible.
+fn member_key(k: u32, s0: vec4<f32>, s1: vec4<f32>, s2: vec4<f32>, c: Cands, code: vec4<u32>, sel: vec4<bool>, min_sep: f32, band: f32) -> u32 {
+    var key = 0u;
+    var j = 0u;
+    loop {
+        let pd = cands_pd(c, j);
+        let m = slot_metric(k, s0, s1, s2, pd.xyz, pd.w, min_sep, band);
+        if (sel[j] && m > NEG_INF) {
+            key = max(key, ordered(m) | code[j]);
+        }
+        j += 1u;
+        if (j >= PER) {
+            break;
+        }
+    }
+    return key;
+}
+
 // Slot round k (1-3) of reduce_batch: the members of each patch post their metric for slot k and the
 // current contact's, then the winner writes its point (or, when neither it nor any member is eligible, the
-// slot empties). Also resets the previous slot's key, which every member has read.
-fn slot_round(k: u32, lid: u32, mine: u32, my: vec4<f32>, min_sep: f32, band: f32) {
+// slot empties). Also resets the previous slot's key, which every member has read. Each invocation works
+// once per distinct patch of its candidates.
+fn slot_round(k: u32, mine: vec4<u32>, c: Cands, code: vec4<u32>, min_sep: f32, band: f32) {
     workgroupBarrier(); // slot k - 1 written
-    let member = mine < MAX_PATCHES;
-    if (member) {
-        if (k == 1u) {
-            atomicStore(&patch_ak[ak_key0(mine)], 0u);
-        } else {
-            atomicStore(&slot_keys[key_of(k - 1u, mine)], 0u);
-        }
-        let s0 = patch_data[pd_slot(mine, 0u)];
-        var s1 = vec4<f32>(0.0);
-        var s2 = vec4<f32>(0.0);
-        if (k >= 2u) {
-            s1 = patch_data[pd_slot(mine, 1u)];
-        }
-        if (k >= 3u) {
-            s2 = patch_data[pd_slot(mine, 2u)];
-        }
-        let cur = patch_data[pd_slot(mine, k)];
-        let m = slot_metric(k, s0, s1, s2, my.xyz, my.w, min_sep, band);
-        var key = select(0u, ordered(m) | (lid + 1u), m > NEG_INF);
-        if (cur.w < VALID_BELOW) {
-            let mc = slot_metric(k, s0, s1, s2, cur.xyz, cur.w, min_sep, band);
-            if (mc > NEG_INF) {
-                key = max(key, ordered(mc));
+    let member = mine < vec4<u32>(MAX_PATCHES);
+    var todo = member;
+    loop {
+        let g = next_group(&todo, mine);
+        if (any(g.sel)) {
+            if (k == 1u) {
+                atomicStore(&patch_ak[ak_key0(g.p)], 0u);
+            } else {
+                atomicStore(&slot_keys[key_of(k - 1u, g.p)], 0u);
+            }
+            let s0 = patch_data[pd_slot(g.p, 0u)];
+            var s1 = vec4<f32>(0.0);
+            var s2 = vec4<f32>(0.0);
+            if (k >= 2u) {
+                s1 = patch_data[pd_slot(g.p, 1u)];
+            }
+            if (k >= 3u) {
+                s2 = patch_data[pd_slot(g.p, 2u)];
+            }
+            let cur = patch_data[pd_slot(g.p, k)];
+            var key = member_key(k, s0, s1, s2, c, code, g.sel, min_sep, band);
+            if (cur.w < VALID_BELOW) {
+                let mc = slot_metric(k, s0, s1, s2, cur.xyz, cur.w, min_sep, band);
+                if (mc > NEG_INF) {
+                    key = max(key, ordered(mc));
+                }
+            }
+            if (key != 0u) {
+                atomicMax(&slot_keys[key_of(k, g.p)], key);
             }
         }
-        if (key != 0u) {
-            atomicMax(&slot_keys[key_of(k, mine)], key);
+        if (!any(todo)) {
+            break;
         }
     }
     workgroupBarrier();
-    if (member) {
-        // The winner writes its point; where neither the current contact (no longer eligible: too close
-        // to or far above the new deepest) nor a member qualifies, the slot empties (every member writes
-        // the same value). One store: lavapipe runs each store instruction lane by lane, taken or not.
-        let key = atomicLoad(&slot_keys[key_of(k, mine)]);
-        let own = (key & IDX_MASK) == lid + 1u;
-        if (own || key == 0u) {
-            patch_data[pd_slot(mine, k)] = select(vec4<f32>(0.0, 0.0, 0.0, EMPTY), my, own);
+    todo = member;
+    loop {
+        let g = next_group(&todo, mine);
+        if (any(g.sel)) {
+            // The winner writes its point; where neither the current contact (no longer eligible: too close
+            // to or far above the new deepest) nor a member qualifies, the slot empties (every invocation with
+            // members writes the same value). One store: lavapipe runs each store instruction lane by lane,
+            // taken or not.
+            let key = atomicLoad(&slot_keys[key_of(k, g.p)]);
+            let hit = g.sel & (code == vec4<u32>(key & IDX_MASK));
+            let own = any(hit);
+            if (own || key == 0u) {
+                patch_data[pd_slot(g.p, k)] = select(vec4<f32>(0.0, 0.0, 0.0, EMPTY), cands_pd(c, first_of(hit | vec4<bool>(!own))), own);
+            }
+        }
+        if (!any(todo)) {
+            break;
         }
     }
 }

@@ -19,7 +19,8 @@ pub(crate) const GENERATE_WGSL: &str = concat!(
 /// The WGSL module of a kernel with the patch budget substituted and the default workgroup size (for
 /// kernels that do not reduce: normals, solver).
 pub fn shader_source(kernel_wgsl: &str, max_patches: u32, kinds: SdfKinds) -> String {
-    shader_source_wg(kernel_wgsl, max_patches, ContactConfig::default().workgroup_size, kinds, false)
+    let c = ContactConfig::default();
+    shader_source_wg(kernel_wgsl, max_patches, c.workgroup_size, c.candidates_per_invocation, kinds, false)
 }
 
 /// Whether the reducing kernels built on `gpu` with `cfg` use subgroup operations (reduce_subgroup.wgsl):
@@ -59,18 +60,21 @@ impl SdfKinds {
     }
 }
 
-/// The WGSL module of a kernel with the patch budget and the reduction's workgroup size substituted, and the
-/// reduction's helpers with or without subgroup operations (the device must have wgpu::Features::SUBGROUP).
+/// The WGSL module of a kernel with the patch budget, the reduction's workgroup size and candidates per
+/// invocation substituted, and the reduction's helpers with or without subgroup operations (the device must
+/// have wgpu::Features::SUBGROUP).
 pub fn shader_source_wg(
     kernel_wgsl: &str,
     max_patches: u32,
     workgroup_size: u32,
+    per: u32,
     kinds: SdfKinds,
     subgroups: bool,
 ) -> String {
     let common = COMMON_WGSL
         .replace("MAX_PATCHES_VALUE", &format!("{max_patches}u"))
-        .replace("WG_VALUE", &format!("{workgroup_size}u"));
+        .replace("WG_VALUE", &format!("{workgroup_size}u"))
+        .replace("PER_VALUE", &format!("{per}u"));
     let flag = |b: bool| if b { "true" } else { "false" };
     let helpers = if subgroups { REDUCE_SUBGROUP_WGSL } else { REDUCE_PLAIN_WGSL };
     format!("{common}\n{helpers}\n{kernel_wgsl}")
@@ -137,7 +141,14 @@ pub struct GenerateKernel {
 impl GenerateKernel {
     /// `subgroups`: see [`reduce_with_subgroups`].
     pub fn new(device: &wgpu::Device, cfg: &ContactConfig, kinds: SdfKinds, subgroups: bool) -> Self {
-        let source = shader_source_wg(GENERATE_WGSL, cfg.max_patches, cfg.workgroup_size, kinds, subgroups);
+        let source = shader_source_wg(
+            GENERATE_WGSL,
+            cfg.max_patches,
+            cfg.workgroup_size,
+            cfg.candidates_per_invocation,
+            kinds,
+            subgroups,
+        );
         GenerateKernel {
             pipeline: compute_pipeline(device, "contact-generate", &source, "generate"),
             retry: compute_pipeline(device, "contact-generate-retry", &source, "generate_retry"),
@@ -381,7 +392,7 @@ pub fn generate_job_cpu(
     let mut found = 0;
     let mut base = 0;
     while base < job.tri_count {
-        let n = (job.tri_count - base).min(cfg.workgroup_size);
+        let n = (job.tri_count - base).min(cfg.batch_size());
         let cands: Vec<Candidate> = (0..n)
             .map(|t| {
                 let v = ((job.tri_first + base + t) * 3) as usize;
@@ -391,7 +402,7 @@ pub fn generate_job_cpu(
             .collect();
         found += cands.iter().filter(|c| c.pd.w < 1e38).count() as u32;
         red.reduce_batch(&cands, cfg.normal_cos, pair.contact_offset, pair.min_separation);
-        base += cfg.workgroup_size;
+        base += cfg.batch_size();
     }
     let patches = red
         .patches(pair.area_unit)

@@ -20,7 +20,14 @@ impl MergeKernel {
             pipeline: compute_pipeline(
                 device,
                 "contact-merge",
-                &shader_source_wg(MERGE_WGSL, cfg.max_patches, cfg.workgroup_size, Default::default(), subgroups),
+                &shader_source_wg(
+                    MERGE_WGSL,
+                    cfg.max_patches,
+                    cfg.workgroup_size,
+                    cfg.candidates_per_invocation,
+                    Default::default(),
+                    subgroups,
+                ),
                 "merge",
             ),
         }
@@ -41,7 +48,7 @@ impl MergeKernel {
 /// CPU twin of one merge workgroup: the pair's job outputs in job order.
 pub fn merge_cpu(pair: &PairGpu, job_patches: &[&[PatchGpu]], cfg: &ContactConfig) -> Vec<PatchGpu> {
     let mut red = Reducer::new(cfg.max_patches);
-    // All jobs' slots as one stream cut into batches of the workgroup size, as merge.wgsl does.
+    // All jobs' slots as one stream cut into batches of the batch size, as merge.wgsl does.
     let stream: Vec<Candidate> = job_patches
         .iter()
         .flat_map(|patches| patches.iter())
@@ -59,7 +66,7 @@ pub fn merge_cpu(pair: &PairGpu, job_patches: &[&[PatchGpu]], cfg: &ContactConfi
             })
         })
         .collect();
-    for batch in stream.chunks(cfg.workgroup_size as usize) {
+    for batch in stream.chunks(cfg.batch_size() as usize) {
         red.reduce_batch(batch, cfg.normal_cos, pair.contact_offset, pair.min_separation);
     }
     red.patches(pair.area_unit)
@@ -70,14 +77,15 @@ mod tests {
     use super::super::generate::{shader_source_wg, GENERATE_WGSL};
     use super::MERGE_WGSL;
 
-    /// The reducing kernels validate with naga at every workgroup size and patch budget.
+    /// The reducing kernels validate with naga at every workgroup size, candidates per invocation and patch
+    /// budget.
     #[test]
     fn reducing_kernels_validate_at_every_workgroup_size() {
-        for wg in [32, 64, 128, 256] {
+        for (wg, per) in [(32, 1), (32, 4), (64, 1), (64, 2), (64, 4), (128, 2), (256, 1)] {
             for max_patches in [16, 64, 256] {
                 for (name, wgsl) in [("generate", GENERATE_WGSL), ("merge", MERGE_WGSL)] {
                     for subgroups in [false, true] {
-                        let src = shader_source_wg(wgsl, max_patches, wg, Default::default(), subgroups);
+                        let src = shader_source_wg(wgsl, max_patches, wg, per, Default::default(), subgroups);
                         let module = naga::front::wgsl::parse_str(&src)
                             .unwrap_or_else(|e| panic!("{name} wg {wg}: {}", e.emit_to_string(&src)));
                         crate::contact::shader_tests::validator(subgroups)

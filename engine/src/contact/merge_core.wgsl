@@ -6,8 +6,8 @@
 fn merge_jobs(lid: u32, pair: Pair, job_base: u32, job_count: u32, out_base: u32) -> u32 {
     reset_patches(lid);
     var pc = 0u;
-    // The jobs' slots form one stream (job by job, 4 slots per patch), cut into batches of WG: most jobs
-    // hold far fewer than WG slots, and a batch costs the same (its barriers and slot rounds) however few
+    // The jobs' slots form one stream (job by job, 4 slots per patch), cut into batches of BATCH: most
+    // jobs hold far fewer than BATCH slots, and a batch costs the same (its barriers and slot rounds) however few
     // candidates it holds.
     var total = 0u;
     for (var j = 0u; j < job_count; j++) {
@@ -15,7 +15,7 @@ fn merge_jobs(lid: u32, pair: Pair, job_base: u32, job_count: u32, out_base: u32
     }
     var first_job = 0u; // the job holding stream index `base`, and its first index
     var first_off = 0u;
-    for (var base = 0u; base < total; base += WG) {
+    for (var base = 0u; base < total; base += BATCH) {
         loop {
             let n = job_patch_count[job_base + first_job] * 4u;
             if (first_off + n > base) {
@@ -24,34 +24,36 @@ fn merge_jobs(lid: u32, pair: Pair, job_base: u32, job_count: u32, out_base: u32
             first_off += n;
             first_job++;
         }
-        var cand = vec4<f32>(0.0, 0.0, 0.0, EMPTY);
-        var normal = vec4<f32>(0.0);
-        let i = base + lid;
-        if (i < total) {
-            var j = first_job;
-            var off = first_off;
-            loop {
-                let n = job_patch_count[job_base + j] * 4u;
-                if (i < off + n) {
-                    break;
+        var cs = cands_empty();
+        // This invocation's PER stream entries, one after another: the walk to their jobs goes on from
+        // one to the next.
+        var j = first_job;
+        var off = first_off;
+        for (var q = 0u; q < PER; q++) {
+            let i = base + lid * PER + q;
+            if (i < total) {
+                loop {
+                    let n = job_patch_count[job_base + j] * 4u;
+                    if (i < off + n) {
+                        break;
+                    }
+                    off += n;
+                    j++;
                 }
-                off += n;
-                j++;
-            }
-            let k = i - off;
-            let p = job_patches[(job_base + j) * MAX_PATCHES + k / 4u];
-            let sl = p.slots[k % 4u];
-            if (sl.w < VALID_BELOW) {
-                var used = 0u;
-                for (var s = 0u; s < 4u; s++) {
-                    used += select(0u, 1u, p.slots[s].w < VALID_BELOW);
+                let k = i - off;
+                let p = job_patches[(job_base + j) * MAX_PATCHES + k / 4u];
+                let sl = p.slots[k % 4u];
+                if (sl.w < VALID_BELOW) {
+                    var used = 0u;
+                    for (var s = 0u; s < 4u; s++) {
+                        used += select(0u, 1u, p.slots[s].w < VALID_BELOW);
+                    }
+                    let units = p.normal.w / (f32(used) * pair.area_unit);
+                    cands_set(&cs, q, sl, vec4<f32>(p.normal.xyz, f32(max(1u, u32(round(units))))));
                 }
-                cand = sl;
-                let units = p.normal.w / (f32(used) * pair.area_unit);
-                normal = vec4<f32>(p.normal.xyz, f32(max(1u, u32(round(units)))));
             }
         }
-        pc = reduce_batch(lid, cand, normal, pc, params.normal_cos, pair.contact_offset, pair.min_separation, true);
+        pc = reduce_batch(lid, cs, pc, params.normal_cos, pair.contact_offset, pair.min_separation, true);
     }
     workgroupBarrier(); // the last batch's slot writes
     for (var p = lid; p < pc; p += WG) {

@@ -42,12 +42,23 @@ pub struct ContactConfig {
     /// Query triangles per generation workgroup; 0 picks a value from the world count at build time.
     /// At most [`max_chunk_triangles`](Self::max_chunk_triangles).
     pub chunk_triangles: u32,
-    /// Invocations per workgroup of the generate and merge kernels = candidates per reduction batch
-    /// (32, 64, 128 or 256); the CPU twin cuts its batches to the same size. Default 64: on lavapipe
+    /// Invocations per workgroup of the generate and merge kernels (32, 64, 128 or 256); a reduction batch
+    /// holds [`batch_size`](Self::batch_size) candidates, and the CPU twin cuts its batches to that size. Default 64: on lavapipe
     /// (which runs a workgroup as width/8 coroutines) it is faster (M16 nut-bolt grid SDF: GPU/twin time
     /// 0.74 vs 1.31 at 1 world, 1.33 vs 1.57 at 64 worlds), except with the analytic bolt SDF at 64
     /// worlds (1.13 vs 0.87); on a GPU 64 is two warps or one wave64.
     pub workgroup_size: u32,
+    /// Candidates each invocation of the generate and merge kernels holds per batch (1, 2 or 4), so a batch
+    /// holds `workgroup_size * candidates_per_invocation` (at most 256) candidates. lavapipe runs every
+    /// workgroup-memory instruction lane by lane, so the reduction costs its memory instructions per lane;
+    /// an invocation with several candidates (consecutive query triangles, which the pipelines then order
+    /// by normal within each job: [`model::normal_ordered`]) reads the patch list once for all of them
+    /// (common.wgsl). Default 1. With 4 the M16 nut-bolt pair's contact handling is faster on lavapipe
+    /// (docs/BENCHMARKS.md, 2026-12-03) and its descent and self-locking keep their accuracy, but larger
+    /// batches in another order keep other contacts, and the single-seed rest tests of the peg and the
+    /// piles came out otherwise (the aligned peg rocking at a median 1.18e-3 m/s against the bound of
+    /// 1e-3; the seed-1 torus and 64-nut piles creeping 8.8 and 2.0 mm in their last second).
+    pub candidates_per_invocation: u32,
     /// Use subgroup operations in the reduction where the device has them, with at least 8 lanes
     /// (reduce_subgroup.wgsl; lavapipe has 8: about 1.1x faster there, see docs/BENCHMARKS.md); false: the
     /// portable kernels. The results are bitwise the same either way.
@@ -62,6 +73,7 @@ impl Default for ContactConfig {
             iterations: 12,
             chunk_triangles: 0,
             workgroup_size: 64,
+            candidates_per_invocation: 1,
             subgroups: true,
         }
     }
@@ -83,14 +95,27 @@ impl ContactConfig {
         n.div_ceil(self.workgroup_size) + 1
     }
 
-    /// Worst-case loop back edges of one `reduce_batch` (common.wgsl) per invocation: Assign (the portable
-    /// one's, unrolled by 4 in reduce_plain.wgsl; the subgroup one takes 8 patches per pass), at most one
-    /// new-patch round per candidate plus the last of each of the two round loops, each with the eviction's
-    /// strided arg-min (the slot rounds have no loops: each member works on its own patch).
+    /// Candidates per reduction batch: `workgroup_size * candidates_per_invocation` (`BATCH` in
+    /// common.wgsl); the CPU twin cuts its batches to this size.
+    pub fn batch_size(&self) -> u32 {
+        self.workgroup_size * self.candidates_per_invocation
+    }
+
+    /// Worst-case loop back edges of one `reduce_batch` (common.wgsl) per invocation: the stores of its
+    /// candidates, Assign (the portable one's, unrolled by 4 in reduce_plain.wgsl; the subgroup one takes 8
+    /// patches per pass), at most one new-patch round per candidate plus the last of each of the two round
+    /// loops, each with the eviction's strided arg-min, and the loops over the distinct patches of the
+    /// invocation's candidates (Assign's posts, slot 0, two per slot round, the last reset: 9, each with at
+    /// most one pass per candidate plus the exit), the slot rounds' loops over the candidates in a patch
+    /// (at most one per candidate and round).
     fn reduce_batch_loops(&self) -> u32 {
+        let per = self.candidates_per_invocation;
+        let stores = per + 1;
         let assign = self.max_patches.div_ceil(4) + 1;
-        let rounds = (self.workgroup_size + 2) * (1 + self.strided(self.max_patches + 1));
-        assign + rounds
+        let rounds = (self.batch_size() + 2) * (1 + self.strided(self.max_patches + 1));
+        let groups = 9 * (per + 1);
+        let members = 3 * per * (per + 1);
+        stores + assign + rounds + groups + members
     }
 
     /// Once per workgroup: reset_patches and the output loop, each with a 4-slot loop per patch.
@@ -100,19 +125,22 @@ impl ContactConfig {
 
     /// Worst-case loop back edges of one generate workgroup (generate.wgsl) over a job of `triangles`.
     pub fn generate_loop_iterations(&self, triangles: u32) -> u64 {
-        // Per batch: the batch loop, the projected-gradient loop and its 3 corners, the reduction.
-        let per_batch = 1 + (self.iterations + 1) + 4 + self.reduce_batch_loops();
-        triangles.div_ceil(self.workgroup_size) as u64 * per_batch as u64 + self.patch_list_loops() as u64 + 1
+        // Per batch: the batch loop, the loop over the invocation's triangles, per triangle the
+        // projected-gradient loop and its 3 corners, the reduction.
+        let per = self.candidates_per_invocation;
+        let per_batch = 1 + (per + 1) + per * ((self.iterations + 1) + 4) + self.reduce_batch_loops();
+        triangles.div_ceil(self.batch_size()) as u64 * per_batch as u64 + self.patch_list_loops() as u64 + 1
     }
 
     /// Worst-case loop back edges of one merge workgroup (merge.wgsl) over a pair of `jobs` jobs.
     pub fn merge_loop_iterations(&self, jobs: u32) -> u64 {
         // The stream holds at most 4 slots per patch of every job; per batch: the batch loop, the search
-        // of its first job, each invocation's walk to its job (a batch spans at most WG / 4 + 1 jobs that
-        // hold slots, plus the empty ones between them, counted once below), the 4-slot count, the
-        // reduction.
-        let batches = (jobs as u64 * self.max_patches as u64 * 4).div_ceil(self.workgroup_size as u64);
-        let per_batch = 1 + 1 + (self.workgroup_size / 4 + 2) + 5 + self.reduce_batch_loops();
+        // of its first job, the loop over the invocation's entries, their walk to their jobs (a batch spans
+        // at most BATCH / 4 + 1 jobs that hold slots, plus the empty ones between them, counted once below;
+        // one more exit per entry), the 4-slot count per entry, the reduction.
+        let per = self.candidates_per_invocation;
+        let batches = (jobs as u64 * self.max_patches as u64 * 4).div_ceil(self.batch_size() as u64);
+        let per_batch = 1 + 1 + (per + 1) + (self.batch_size() / 4 + 2 + per) + 5 * per + self.reduce_batch_loops();
         batches * per_batch as u64 + 3 * (jobs as u64 + 1) + self.patch_list_loops() as u64
     }
 
@@ -172,6 +200,16 @@ impl ContactConfig {
                 expected: "32, 64, 128 or 256".into(),
             });
         }
+        if ![1, 2, 4].contains(&self.candidates_per_invocation) || self.batch_size() > 256 {
+            return Err(EngineError::Config {
+                field: "candidates_per_invocation",
+                value: self.candidates_per_invocation.to_string(),
+                expected: format!(
+                    "1, 2 or 4, with at most 256 candidates per batch (workgroup_size {} x candidates_per_invocation)",
+                    self.workgroup_size
+                ),
+            });
+        }
         let max_chunk = self.max_chunk_triangles();
         if max_chunk == 0 || self.max_jobs_per_pair() == 0 {
             return Err(EngineError::Config {
@@ -193,12 +231,12 @@ impl ContactConfig {
     }
 
     /// Bytes of workgroup memory the generate and merge kernels declare (common.wgsl): the batch (`cand_pd`,
-    /// `cand_n`: 2 x 16 bytes per invocation), the patch list (`patch_data` 5 x 16,
+    /// `cand_n`: 2 x 16 bytes per candidate), the patch list (`patch_data` 5 x 16,
     /// `patch_ak` 2 x 4, `slot_keys` 2 x 4 per patch, budget + 1 patches), `wg_best`, `wg_victim` (12 bytes) and
     /// generate.wgsl's `wg_retry` (16).
     pub fn workgroup_bytes(&self) -> u32 {
         let cap = self.max_patches + 1;
-        self.workgroup_size * 16 * 2 + cap * (5 * 16 + 2 * 4 + 2 * 4) + 12 + 16
+        self.batch_size() * 16 * 2 + cap * (5 * 16 + 2 * 4 + 2 * 4) + 12 + 16
     }
 }
 
@@ -266,14 +304,27 @@ mod tests {
         assert!(ContactConfig::default().validate().is_ok());
         let e = ContactConfig { max_patches: 300, ..Default::default() }.validate().unwrap_err().to_string();
         assert!(e.contains("max_patches") && e.contains("16..=256"), "{e}");
-        // The budget of 256 patches fits the 32 KiB of workgroup memory most GPUs offer.
-        assert!(ContactConfig { max_patches: 256, ..Default::default() }.workgroup_bytes() <= 32768);
+        // The budget of 256 patches fits the 32 KiB of workgroup memory most GPUs offer with batches of up
+        // to 128 candidates.
+        let c = ContactConfig { max_patches: 256, candidates_per_invocation: 2, ..Default::default() };
+        assert!(c.workgroup_bytes() <= 32768);
         assert!(ContactConfig::default().workgroup_bytes() <= 16384);
         let e = ContactConfig { workgroup_size: 96, ..Default::default() }.validate().unwrap_err().to_string();
         assert!(e.contains("workgroup_size"), "{e}");
+        for (wg, per) in [(64, 3), (64, 8), (128, 4), (256, 2)] {
+            let c = ContactConfig { workgroup_size: wg, candidates_per_invocation: per, ..Default::default() };
+            let e = c.validate().unwrap_err().to_string();
+            assert!(e.contains("candidates_per_invocation") && e.contains(&per.to_string()), "{e}");
+        }
         for wg in [32, 64, 128, 256] {
             for max_patches in [16, 64, 256] {
-                let c = ContactConfig { workgroup_size: wg, max_patches, ..Default::default() };
+                let per = (256 / wg).min(4);
+                let c = ContactConfig {
+                    workgroup_size: wg,
+                    max_patches,
+                    candidates_per_invocation: per,
+                    ..Default::default()
+                };
                 assert!(c.validate().is_ok(), "{c:?}");
                 // With budgets up to the default, our M16 and Factory's M16 nut (11512, 15078 triangles)
                 // fit one merge workgroup (a budget of 256 at 32 wide takes 10752 triangles per pair).

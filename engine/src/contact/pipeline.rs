@@ -107,8 +107,8 @@ impl ContactPipeline {
         let need = cfg.workgroup_bytes();
         if need > limits.max_compute_workgroup_storage_size {
             return Err(EngineError::Gpu(format!(
-                "max_patches = {} needs {need} bytes of workgroup memory; adapter {:?} offers max_compute_workgroup_storage_size = {}; lower max_patches",
-                cfg.max_patches, gpu.info.name, limits.max_compute_workgroup_storage_size
+                "max_patches = {} with batches of {} candidates needs {need} bytes of workgroup memory; adapter {:?} offers max_compute_workgroup_storage_size = {}; lower max_patches or candidates_per_invocation",
+                cfg.max_patches, cfg.batch_size(), gpu.info.name, limits.max_compute_workgroup_storage_size
             )));
         }
         if world_count == 0 || world_count > limits.max_compute_workgroups_per_dimension {
@@ -129,7 +129,7 @@ impl ContactPipeline {
         } else {
             cfg.chunk_triangles
         };
-        let flat = model.flatten(chunk)?;
+        let flat = model.flatten_ordered(chunk, cfg.candidates_per_invocation > 1)?;
         let too_many_jobs = flat.pairs.iter().find(|p| p.job_count > max_jobs);
         if chunk > cfg.max_chunk_triangles() || too_many_jobs.is_some() {
             let triangles = too_many_jobs.map_or(model.max_triangles(), |p| p.tri_count);

@@ -3,27 +3,34 @@
 
 fn lanes_init() {}
 
-// The most similar patch of [0, pc0) to unit normal n with a dot product of at least `cos` (ties: the
-// highest index), or UNASSIGNED. Unrolled by 4 (see the note on loops in common.wgsl).
-fn best_patch(n: vec3<f32>, pc0: u32, cos: f32) -> u32 {
-    var best = cos;
-    var mine = UNASSIGNED;
-    for (var p = 0u; p < pc0; p += 4u) {
-        assign_step(p, pc0, n, &best, &mine);
-        assign_step(p + 1u, pc0, n, &best, &mine);
-        assign_step(p + 2u, pc0, n, &best, &mine);
-        assign_step(p + 3u, pc0, n, &best, &mine);
+// Per candidate of c: the most similar patch of [0, pc0) to its unit normal with a dot product of at least
+// `cos` (ties: the highest index), or UNASSIGNED. Unrolled by 4 (see the note on loops in common.wgsl).
+fn best_patch(c: Cands, pc0: u32, cos: f32) -> vec4<u32> {
+    var best = vec4<f32>(cos);
+    var mine = vec4<u32>(UNASSIGNED);
+    // Exit test at the end of the pass (see the note on loops in common.wgsl); with no patches the one pass
+    // changes nothing.
+    var p = 0u;
+    loop {
+        assign_step(p, pc0, c, &best, &mine);
+        assign_step(p + 1u, pc0, c, &best, &mine);
+        assign_step(p + 2u, pc0, c, &best, &mine);
+        assign_step(p + 3u, pc0, c, &best, &mine);
+        p += 4u;
+        if (p >= pc0) {
+            break;
+        }
     }
     return mine;
 }
 
-fn assign_step(p: u32, pc0: u32, n: vec3<f32>, best: ptr<function, f32>, mine: ptr<function, u32>) {
+fn assign_step(p: u32, pc0: u32, c: Cands, best: ptr<function, vec4<f32>>, mine: ptr<function, vec4<u32>>) {
     if (p < pc0) {
-        let d = dot(n, patch_data[pd_normal(p)].xyz);
-        if (d >= *best) {
-            *best = d;
-            *mine = p;
-        }
+        let m = patch_data[pd_normal(p)].xyz;
+        let d = c.nx * m.x + c.ny * m.y + c.nz * m.z;
+        let better = d >= *best;
+        *best = select(*best, d, better);
+        *mine = select(*mine, vec4<u32>(p), better);
     }
 }
 

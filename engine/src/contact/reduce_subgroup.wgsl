@@ -17,34 +17,41 @@ fn lanes_init() {
     sg_lane = subgroupExclusiveAdd(1u);
 }
 
-// The most similar patch of [0, pc0) to unit normal n with a dot product of at least `cos` (ties: the
-// highest index), or UNASSIGNED. 8 patches per pass, read by lanes 0-7 (lavapipe's subgroup size; the host
-// uses this file only where subgroups have at least 8 lanes; on wider ones the other lanes read copies),
-// so the loop runs fewer passes than the portable one (see the note on loops in common.wgsl).
-fn best_patch(n: vec3<f32>, pc0: u32, cos: f32) -> u32 {
-    var best = cos;
-    var mine = UNASSIGNED;
-    for (var base = 0u; base < pc0; base += 8u) {
+// Per candidate of c: the most similar patch of [0, pc0) to its unit normal with a dot product of at least
+// `cos` (ties: the highest index), or UNASSIGNED. 8 patches per pass, read by lanes 0-7 (lavapipe's subgroup
+// size; the host uses this file only where subgroups have at least 8 lanes; on wider ones the other lanes
+// read copies), so the loop runs fewer passes than the portable one (see the note on loops in common.wgsl).
+fn best_patch(c: Cands, pc0: u32, cos: f32) -> vec4<u32> {
+    var best = vec4<f32>(cos);
+    var mine = vec4<u32>(UNASSIGNED);
+    // Exit test at the end of the pass (see the note on loops in common.wgsl); with no patches the one pass
+    // changes nothing.
+    var base = 0u;
+    loop {
         let lane_n = patch_data[pd_normal(min(base + (sg_lane & 7u), PATCH_CAP - 1u))].xyz;
-        shuffle_step(base, 0u, lane_n, pc0, n, &best, &mine);
-        shuffle_step(base, 1u, lane_n, pc0, n, &best, &mine);
-        shuffle_step(base, 2u, lane_n, pc0, n, &best, &mine);
-        shuffle_step(base, 3u, lane_n, pc0, n, &best, &mine);
-        shuffle_step(base, 4u, lane_n, pc0, n, &best, &mine);
-        shuffle_step(base, 5u, lane_n, pc0, n, &best, &mine);
-        shuffle_step(base, 6u, lane_n, pc0, n, &best, &mine);
-        shuffle_step(base, 7u, lane_n, pc0, n, &best, &mine);
+        shuffle_step(base, 0u, lane_n, pc0, c, &best, &mine);
+        shuffle_step(base, 1u, lane_n, pc0, c, &best, &mine);
+        shuffle_step(base, 2u, lane_n, pc0, c, &best, &mine);
+        shuffle_step(base, 3u, lane_n, pc0, c, &best, &mine);
+        shuffle_step(base, 4u, lane_n, pc0, c, &best, &mine);
+        shuffle_step(base, 5u, lane_n, pc0, c, &best, &mine);
+        shuffle_step(base, 6u, lane_n, pc0, c, &best, &mine);
+        shuffle_step(base, 7u, lane_n, pc0, c, &best, &mine);
+        base += 8u;
+        if (base >= pc0) {
+            break;
+        }
     }
     return mine;
 }
 
-// Patch base + j, read by lane j, against n.
-fn shuffle_step(base: u32, j: u32, lane_n: vec3<f32>, pc0: u32, n: vec3<f32>, best: ptr<function, f32>, mine: ptr<function, u32>) {
-    let d = dot(n, subgroupShuffle(lane_n, j));
-    if (base + j < pc0 && d >= *best) {
-        *best = d;
-        *mine = base + j;
-    }
+// Patch base + j, read by lane j, against the candidates' normals (dot's order).
+fn shuffle_step(base: u32, j: u32, lane_n: vec3<f32>, pc0: u32, c: Cands, best: ptr<function, vec4<f32>>, mine: ptr<function, vec4<u32>>) {
+    let m = subgroupShuffle(lane_n, j);
+    let d = c.nx * m.x + c.ny * m.y + c.nz * m.z;
+    let better = (d >= *best) & vec4<bool>(base + j < pc0);
+    *best = select(*best, d, better);
+    *mine = select(*mine, vec4<u32>(base + j), better);
 }
 
 // What this invocation posts to an atomic max / add / min that every invocation posts v to (0, 0, NONE:

@@ -83,6 +83,7 @@ fn sdf_sample(pair: Pair, p: vec3<f32>) -> Sample {
 fn sdf_bind(pair: Pair) {
     if (HAS_THREAD && pair.sdf_kind == 2u) {
         analytic_load_thread(pair.sdf_dims.w);
+        thread_derive();
     }
     if (HAS_REVOLVED && pair.sdf_kind == 3u) {
         analytic_load_revolved(pair.sdf_dims.w);

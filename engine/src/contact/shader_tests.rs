@@ -31,7 +31,7 @@ fn contact_shaders_validate_with_naga() {
                     panic!("{name}.wgsl with max_patches = {max_patches}, {kinds:?}:\n{e}");
                 }
             }
-            let src = shader_source_wg(wgsl, max_patches, 64, super::generate::SdfKinds::default(), true);
+            let src = shader_source_wg(wgsl, max_patches, 64, 4, super::generate::SdfKinds::default(), true);
             if let Err(e) = validate(&src, true) {
                 panic!("{name}.wgsl with max_patches = {max_patches}, subgroups:\n{e}");
             }

@@ -204,8 +204,9 @@ impl CrowdPipeline {
         }
         if contact.workgroup_bytes() > limits.max_compute_workgroup_storage_size {
             return Err(EngineError::Gpu(format!(
-                "max_patches = {} needs {} bytes of workgroup memory; adapter {:?} offers {}",
+                "max_patches = {} with batches of {} candidates needs {} bytes of workgroup memory; adapter {:?} offers {}; lower max_patches or candidates_per_invocation",
                 contact.max_patches,
+                contact.batch_size(),
                 contact.workgroup_bytes(),
                 gpu.info.name,
                 limits.max_compute_workgroup_storage_size
@@ -326,9 +327,10 @@ impl CrowdPipeline {
         let rw = Binding::Storage { read_only: false };
         let kinds = SdfKinds::of(&flat.flat.pairs);
         let wg = contact.workgroup_size;
+        let per = contact.candidates_per_invocation;
         let subgroups = reduce_with_subgroups(gpu, contact);
         let source = |body: &str| {
-            shader_source_wg(&format!("{CROWD_COMMON}\n{body}"), contact.max_patches, wg, kinds, subgroups)
+            shader_source_wg(&format!("{CROWD_COMMON}\n{body}"), contact.max_patches, wg, per, kinds, subgroups)
         };
         let near_layout = gpu.explicit_layout(
             "crowd-near",
@@ -731,14 +733,20 @@ mod tests {
         for (name, body) in
             [("near", NEAR_WGSL), ("contacts", CONTACTS_WGSL), ("merge", MERGE_WGSL), ("solve", SOLVE_WGSL)]
         {
-            for (max_patches, wg) in [(16, 64), (64, 256)] {
+            for (max_patches, wg, per) in [(16, 64, 4), (64, 256, 1), (64, 128, 2)] {
                 for kinds in SdfKinds::combinations() {
                     for subgroups in [false, true] {
-                        let src =
-                            shader_source_wg(&format!("{CROWD_COMMON}\n{body}"), max_patches, wg, kinds, subgroups);
+                        let src = shader_source_wg(
+                            &format!("{CROWD_COMMON}\n{body}"),
+                            max_patches,
+                            wg,
+                            per,
+                            kinds,
+                            subgroups,
+                        );
                         if let Err(e) = crate::contact::shader_tests::validate(&src, subgroups) {
                             panic!(
-                                "crowd {name}.wgsl, max_patches {max_patches}, workgroup {wg}, {kinds:?}, subgroups {subgroups}:\n{e}"
+                                "crowd {name}.wgsl, max_patches {max_patches}, workgroup {wg} x {per}, {kinds:?}, subgroups {subgroups}:\n{e}"
                             );
                         }
                     }

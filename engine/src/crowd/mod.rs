@@ -163,8 +163,9 @@ impl CrowdModel {
         Ok(())
     }
 
-    /// The templates flattened for the GPU (jobs of `chunk` triangles each); body fields are placeholders.
-    pub fn flatten(&self, chunk: u32) -> Result<FlatModel> {
+    /// The templates flattened for the GPU (jobs of `chunk` triangles each, ordered by normal within each
+    /// job where `by_normal`: see ContactModel::flatten_ordered); body fields are placeholders.
+    pub fn flatten(&self, chunk: u32, by_normal: bool) -> Result<FlatModel> {
         let statics: Vec<bool> = (0..self.templates.len() as u32).map(|t| self.static_rule.contains(&t)).collect();
         let pairs = self
             .templates
@@ -172,7 +173,7 @@ impl CrowdModel {
             .zip(&statics)
             .map(|(p, &is_static)| PairSpec { body_a: 0, body_b: if is_static { NO_BODY } else { 0 }, ..p.clone() })
             .collect();
-        ContactModel { body_count: self.body_count, pairs }.flatten(chunk)
+        ContactModel { body_count: self.body_count, pairs }.flatten_ordered(chunk, by_normal)
     }
 }
 
@@ -396,7 +397,7 @@ impl CrowdFlat {
         for t in &mut model.templates {
             t.query = std::sync::Arc::new(spatial_order(&t.query));
         }
-        let flat = model.flatten(chunk)?;
+        let flat = model.flatten(chunk, contact.candidates_per_invocation > 1)?;
         let jobs_per_pair = flat.pairs.iter().map(|p| p.job_count).max().unwrap_or(1).max(1);
         if chunk > contact.max_chunk_triangles() || jobs_per_pair > contact.max_jobs_per_pair() {
             return Err(EngineError::Config {

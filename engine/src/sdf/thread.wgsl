@@ -85,13 +85,13 @@ fn signed_from_closest(x: vec2<f32>, c: Closest, inside: bool, normal: vec2<f32>
 }
 
 // Twin of thread.rs hex_prism, which explains the fold.
-fn hex_prism_sample(apothem: f32, z0: f32, z1: f32, p: vec3<f32>) -> Sample {
+// `half_edge` = apothem / sqrt 3 (ThreadDerived).
+fn hex_prism_sample(apothem: f32, half_edge: f32, z0: f32, z1: f32, p: vec3<f32>) -> Sample {
     let q = vec2<f32>(abs(p.x), abs(p.y));
     let a = apothem;
     let k = vec2<f32>(-0.5, 0.5 * SQRT3_T);
     let above = dot(k, q) > 0.0;
     let r = select(q, q - 2.0 * dot(k, q) * k, above);
-    let half_edge = a / SQRT3_T;
     let dv = vec2<f32>(r.x - a, r.y - clamp(r.y, -half_edge, half_edge));
     let beside = abs(r.y) <= half_edge;
     let len = length(dv);
@@ -112,6 +112,57 @@ fn hex_prism_sample(apothem: f32, z0: f32, z1: f32, p: vec3<f32>) -> Sample {
     return Sample(dz, vec3<f32>(0.0, 0.0, sz));
 }
 
+// What thread_sample needs of the words beyond the words themselves, derived once per pair by
+// thread_derive (from sdf_bind) with the same operations it used per sample. Why: lavapipe keeps private
+// values in memory and recomputed these at every sample (8 divisions, a square root; the disassembly of
+// the generate kernel, 2026-12-03); a GPU compiler would hoist them, but not out of the job's loops.
+struct ThreadDerived {
+    lead: f32,       // [m / rad]
+    quarter: f32,    // pitch / 4 [m]
+    // Profile corners (s, rho) [m] and segment vectors pb - pa, pc - pb, pd - pc with squared lengths.
+    pa: vec2<f32>,
+    pb: vec2<f32>,
+    pc: vec2<f32>,
+    ab: vec2<f32>,
+    bc: vec2<f32>,
+    cd: vec2<f32>,
+    len2: vec3<f32>,
+    flank_n: vec2<f32>,
+    head_zc: f32,    // [m]
+    head_half: f32,  // [m]
+    head_half_edge: f32, // [m]
+}
+var<private> thr: ThreadDerived;
+
+fn thread_derive() {
+    let pitch = tw(0u);
+    let pitch_radius = tw(2u);
+    let min_radius = tw(3u);
+    let max_radius = tw(4u);
+    let a = max(0.25 * pitch - (max_radius - pitch_radius) / SQRT3_T, 0.0);
+    let b = min(0.25 * pitch + (pitch_radius - min_radius) / SQRT3_T, 0.5 * pitch);
+    thr.lead = pitch / 6.2831855;
+    thr.quarter = 0.25 * pitch;
+    thr.pa = vec2<f32>(0.0, max_radius);
+    thr.pb = vec2<f32>(a, max_radius);
+    thr.pc = vec2<f32>(b, min_radius);
+    let pd = vec2<f32>(0.5 * pitch, min_radius);
+    thr.ab = thr.pb - thr.pa;
+    thr.bc = thr.pc - thr.pb;
+    thr.cd = pd - thr.pc;
+    thr.len2 = vec3<f32>(dot(thr.ab, thr.ab), dot(thr.bc, thr.bc), dot(thr.cd, thr.cd));
+    thr.flank_n = normalize(vec2<f32>(max_radius - min_radius, b - a));
+    thr.head_zc = 0.5 * (tw(9u) + tw(10u));
+    thr.head_half = 0.5 * (tw(10u) - tw(9u));
+    thr.head_half_edge = tw(8u) / SQRT3_T;
+}
+
+// seg_closest(x, a, a + ab) with ab and dot(ab, ab) given: the same operations.
+fn seg_closest_from(x: vec2<f32>, a: vec2<f32>, ab: vec2<f32>, len2: f32) -> Closest {
+    let t = clamp(dot(x - a, ab) / len2, 0.0, 1.0);
+    return Closest(a + ab * t, t > 0.0 && t < 1.0);
+}
+
 fn thread_sample(p: vec3<f32>) -> Sample {
     let pitch = tw(0u);
     let phase = tw(1u);
@@ -121,33 +172,26 @@ fn thread_sample(p: vec3<f32>) -> Sample {
     let rho = max(sqrt(p.x * p.x + p.y * p.y), 1.0e-9);
     let radial = vec3<f32>(p.x / rho, p.y / rho, 0.0);
     let theta = atan2(p.y, p.x);
-    let lead = pitch / 6.2831855;
+    let lead = thr.lead;
     let u = p.z - phase - lead * theta;
     let w = u - pitch * round(u / pitch);
     let s = abs(w);
-    let a = max(0.25 * pitch - (max_radius - pitch_radius) / SQRT3_T, 0.0);
-    let b = min(0.25 * pitch + (pitch_radius - min_radius) / SQRT3_T, 0.5 * pitch);
     let x = vec2<f32>(s, rho);
-    let pa = vec2<f32>(0.0, max_radius);
-    let pb = vec2<f32>(a, max_radius);
-    let pc = vec2<f32>(b, min_radius);
-    let pd = vec2<f32>(0.5 * pitch, min_radius);
-    let c1 = seg_closest(x, pa, pb);
-    let c2 = seg_closest(x, pb, pc);
-    let c3 = seg_closest(x, pc, pd);
+    let c1 = seg_closest_from(x, thr.pa, thr.ab, thr.len2.x);
+    let c2 = seg_closest_from(x, thr.pb, thr.bc, thr.len2.y);
+    let c3 = seg_closest_from(x, thr.pc, thr.cd, thr.len2.z);
     let d1 = dot(x - c1.c, x - c1.c);
     let d2 = dot(x - c2.c, x - c2.c);
     let d3 = dot(x - c3.c, x - c3.c);
-    let flank_n = normalize(vec2<f32>(max_radius - min_radius, b - a));
     var c = c1;
     var fallback = vec2<f32>(0.0, 1.0);
     if (d2 < d1 && d2 <= d3) {
         c = c2;
-        fallback = flank_n;
+        fallback = thr.flank_n;
     } else if (d3 < d1 && d3 < d2) {
         c = c3;
     }
-    let r_at = clamp(pitch_radius + SQRT3_T * (0.25 * pitch - s), min_radius, max_radius);
+    let r_at = clamp(pitch_radius + SQRT3_T * (thr.quarter - s), min_radius, max_radius);
     let s2 = signed_from_closest(x, c, rho < r_at, fallback);
     let sign_w = select(1.0, -1.0, w < 0.0);
     let tangential = vec3<f32>(-radial.y, radial.x, 0.0);
@@ -166,11 +210,9 @@ fn thread_sample(p: vec3<f32>) -> Sample {
     // The head's field is at least its slab's (|z - zc| - half height; hex_prism_sample never returns
     // less, up to rounding: hence the 1 um margin), so beside the thread it cannot win: skip its two
     // segment projections and square roots (most samples of a nut on the thread are far above the head).
-    let head_z0 = tw(9u);
-    let head_z1 = tw(10u);
-    let head_slab = abs(p.z - 0.5 * (head_z0 + head_z1)) - 0.5 * (head_z1 - head_z0);
+    let head_slab = abs(p.z - thr.head_zc) - thr.head_half;
     if (tw(7u) != 0.0 && head_slab < d + HEAD_SKIP_MARGIN) {
-        let h = hex_prism_sample(tw(8u), head_z0, head_z1, p);
+        let h = hex_prism_sample(tw(8u), thr.head_half_edge, tw(9u), tw(10u), p);
         if (h.d < d) {
             d = h.d;
             g = h.g;

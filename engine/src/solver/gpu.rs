@@ -131,8 +131,8 @@ pub(crate) fn solver_params(
 }
 
 /// Values of solver_core.wgsl's `override` constants for `cfg`.
-pub(crate) fn solver_constants(cfg: &SolverConfig) -> [(&'static str, f64); 1] {
-    [("FRICTION_PER_PATCH", if cfg.friction_per_patch { 1.0 } else { 0.0 })]
+pub(crate) fn solver_constants(cfg: &SolverConfig) -> [(&'static str, f64); 2] {
+    [("FRICTION_PER_PATCH", if cfg.friction_per_patch { 1.0 } else { 0.0 }), ("PATCH_ITERS", cfg.patch_iters as f64)]
 }
 
 /// The bodies as the kernels read them.

@@ -34,9 +34,19 @@ fn row_index(row0: u32, p: u32, i: u32, k: u32) -> u32 {
 // (lavapipe budgets loop passes): a Gauss-Seidel sweep (warm = false) or the warm start (warm = true), on the
 // normals and separations resample_rows stored.
 fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool) {
-    for (var p = 0u; p < sp.pair_count; p++) {
+    if (sp.pair_count == 0u) {
+        return;
+    }
+    // The loops here test for exit at the end of the pass: lavapipe runs a loop's body once more, masked,
+    // after a last pass that ends with the test at the top (contact/common.wgsl on loops).
+    var p = 0u;
+    loop {
         let count = patch_counts[world * sp.pair_count + p];
         pair_pass(world, p, row_index(row0, p, 0u, 0u), count, h, bias, warm, false);
+        p += 1u;
+        if (p >= sp.pair_count) {
+            break;
+        }
     }
 }
 
@@ -45,8 +55,16 @@ fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool) {
 // constants: lavapipe runs both sides of every branch, so a sweep that took a run-time resample flag ran
 // the sampling code, masked, in every one of its 20 iterations (and each sweep inlined it).
 fn resample_rows(world: u32, row0: u32) {
-    for (var p = 0u; p < sp.pair_count; p++) {
+    if (sp.pair_count == 0u) {
+        return;
+    }
+    var p = 0u;
+    loop {
         resample_pair(world, p, row_index(row0, p, 0u, 0u), patch_counts[world * sp.pair_count + p]);
+        p += 1u;
+        if (p >= sp.pair_count) {
+            break;
+        }
     }
 }
 
@@ -95,25 +113,53 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     let first = world * sp.body_count;
-    for (var sub = 0u; sub < sp.substeps; sub++) {
-        for (var b = 0u; b < sp.body_count; b++) {
+    // Substeps (at least 1), bodies (at least 1) and sweeps loop with the exit test at the end of the pass
+    // (see sweep): with tests at the top, lavapipe ran every substep's whole body once more, masked, and a
+    // masked sweep after each run of sweeps (2026-12-03, docs/BENCHMARKS.md).
+    var sub = 0u;
+    loop {
+        var b = 0u;
+        loop {
             integrate_velocity(first, b, h);
+            b += 1u;
+            if (b >= sp.body_count) {
+                break;
+            }
         }
         sweep(world, row0, h, true, true);
         if (sp.pos_iters > 0u) {
             resample_rows(world, row0);
+            var it = 0u;
+            loop {
+                sweep(world, row0, h, true, false);
+                it += 1u;
+                if (it >= sp.pos_iters) {
+                    break;
+                }
+            }
         }
-        for (var it = 0u; it < sp.pos_iters; it++) {
-            sweep(world, row0, h, true, false);
-        }
-        for (var b = 0u; b < sp.body_count; b++) {
+        b = 0u;
+        loop {
             integrate_position(first, b, h);
+            b += 1u;
+            if (b >= sp.body_count) {
+                break;
+            }
         }
         if (sp.vel_iters > 0u) {
             resample_rows(world, row0);
+            var it = 0u;
+            loop {
+                sweep(world, row0, h, false, false);
+                it += 1u;
+                if (it >= sp.vel_iters) {
+                    break;
+                }
+            }
         }
-        for (var it = 0u; it < sp.vel_iters; it++) {
-            sweep(world, row0, h, false, false);
+        sub += 1u;
+        if (sub >= sp.substeps) {
+            break;
         }
     }
     // A world that went non-finite or faster than max_speed is flagged for the caller to reset.

@@ -49,6 +49,11 @@ struct Row {
 // pipeline is built: lavapipe runs both sides of every branch, so as a uniform flag the per-patch share's
 // 8 storage reads ran, masked, in every row update.
 override FRICTION_PER_PATCH: bool = false;
+// SolverConfig::patch_iters (also in sp.patch_iters for the loop budget), a constant of the pipeline: with
+// a run-time bound, lavapipe ran the re-sweep loop's body (four rows), masked, once per patch even where
+// patch_iters is 1 (a loop's body runs once more after its last pass; contact/common.wgsl), which made a
+// sweep cost about twice its rows (2026-12-03, docs/BENCHMARKS.md).
+override PATCH_ITERS: u32 = 1u;
 
 // vec4s per row in solver_scratch (solver/gpu.rs ROW_VEC4).
 const ROW: u32 = 4u;
@@ -230,12 +235,18 @@ fn resample_pair(world: u32, p: u32, first: u32, count: u32) {
     sdf_bind(pair);
     let va = view(world, pair.body_a);
     let vb = view(world, pair.body_b);
-    for (var i = 0u; i < count; i++) {
+    // Exit test at the end of the pass (count >= 1 here): see pair_pass.
+    var i = 0u;
+    loop {
         let g0 = first + i * 4u * ROW;
         resample_slot(pair, va, vb, g0);
         resample_slot(pair, va, vb, g0 + ROW);
         resample_slot(pair, va, vb, g0 + 2u * ROW);
         resample_slot(pair, va, vb, g0 + 3u * ROW);
+        i += 1u;
+        if (i >= count) {
+            break;
+        }
     }
 }
 
@@ -423,7 +434,10 @@ fn pair_pass(world: u32, p: u32, first: u32, count: u32, h: f32, bias: bool, war
     let c = PairCtx(pair, view(world, pair.body_a), view(world, pair.body_b), dyn_of(world, pair.body_a), dyn_of(world, pair.body_b));
     var vla = vel_load(c.da);
     var vlb = vel_load(c.db);
-    for (var i = 0u; i < count; i++) {
+    // Exit test at the end of the pass (count >= 1 here): lavapipe runs a loop's body once more, masked,
+    // after a last pass that ends with the test at the top (contact/common.wgsl on loops).
+    var i = 0u;
+    loop {
         let g0 = first + i * 4u * ROW;
         if (warm) {
             warm_row(c, &vla, &vlb, g0);
@@ -435,12 +449,23 @@ fn pair_pass(world: u32, p: u32, first: u32, count: u32, h: f32, bias: bool, war
             solve_row(c, &vla, &vlb, g0, g0 + ROW, h, bias, resample);
             solve_row(c, &vla, &vlb, g0, g0 + 2u * ROW, h, bias, resample);
             solve_row(c, &vla, &vlb, g0, g0 + 3u * ROW, h, bias, resample);
-            for (var inner = 1u; inner < sp.patch_iters; inner++) {
-                solve_row(c, &vla, &vlb, g0, g0, h, bias, false);
-                solve_row(c, &vla, &vlb, g0, g0 + ROW, h, bias, false);
-                solve_row(c, &vla, &vlb, g0, g0 + 2u * ROW, h, bias, false);
-                solve_row(c, &vla, &vlb, g0, g0 + 3u * ROW, h, bias, false);
+            if (PATCH_ITERS > 1u) {
+                var inner = 1u;
+                loop {
+                    solve_row(c, &vla, &vlb, g0, g0, h, bias, false);
+                    solve_row(c, &vla, &vlb, g0, g0 + ROW, h, bias, false);
+                    solve_row(c, &vla, &vlb, g0, g0 + 2u * ROW, h, bias, false);
+                    solve_row(c, &vla, &vlb, g0, g0 + 3u * ROW, h, bias, false);
+                    inner += 1u;
+                    if (inner >= PATCH_ITERS) {
+                        break;
+                    }
+                }
             }
+        }
+        i += 1u;
+        if (i >= count) {
+            break;
         }
     }
     vel_store(c.da, vla);
