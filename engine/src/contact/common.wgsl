@@ -295,6 +295,17 @@ fn cands_n(c: Cands, j: u32) -> vec4<f32> {
     return vec4<f32>(c.nx[j], c.ny[j], c.nz[j], c.units[j]);
 }
 
+// dot(n, m) for each candidate's normal n: WGSL's dot, as with one candidate per invocation (a compiler may
+// fuse dot's multiply-adds; written out as products and sums, the bins came out otherwise in the last bit).
+fn dot4(c: Cands, m: vec3<f32>) -> vec4<f32> {
+    return vec4<f32>(
+        dot(vec3<f32>(c.nx.x, c.ny.x, c.nz.x), m),
+        dot(vec3<f32>(c.nx.y, c.ny.y, c.nz.y), m),
+        dot(vec3<f32>(c.nx.z, c.ny.z, c.nz.z), m),
+        dot(vec3<f32>(c.nx.w, c.ny.w, c.nz.w), m),
+    );
+}
+
 fn ordered4(f: vec4<f32>) -> vec4<u32> {
     return vec4<u32>(ordered(f.x), ordered(f.y), ordered(f.z), ordered(f.w));
 }
@@ -365,8 +376,7 @@ fn add_patch(lid: u32, best: u32, idx: u32, c: Cands, units: vec4<u32>, key0: ve
         var v = select(vec4<f32>(0.0, 0.0, 0.0, EMPTY), cand_pd[seed], lid == 1u);
         patch_data[pd_normal(idx) + lid] = select(v, vec4<f32>(seed_n, 0.0), lid == 0u);
     }
-    // dot(n, seed_n) per candidate, in dot's order.
-    let d = c.nx * seed_n.x + c.ny * seed_n.y + c.nz * seed_n.z;
+    let d = dot4(c, seed_n);
     let joins = (*mine == vec4<u32>(UNASSIGNED)) & (d >= vec4<f32>(normal_cos));
     *mine = select(*mine, vec4<u32>(idx), joins);
     let add = combine_add(sum4(select(vec4<u32>(0u), units, joins)));

@@ -275,8 +275,8 @@ pub fn minimise_on_triangle_cpu(
     let det = g11 * g22 - g12 * g12;
     let mut uv = glam::Vec2::splat(1.0 / 3.0);
     let (mut x, mut s) = start;
-    for corner in [glam::Vec2::ZERO, glam::Vec2::X, glam::Vec2::Y] {
-        let xi = a + corner.x * e1 + corner.y * e2;
+    // The corners themselves (not a + u e1 + v e2, which rounds b and c; as the kernel).
+    for (corner, xi) in [(glam::Vec2::ZERO, a), (glam::Vec2::X, b), (glam::Vec2::Y, c)] {
         let si = sdf_sample_cpu(pair, sdf, xi);
         if si.0 < s.0 {
             (uv, x, s) = (corner, xi, si);

@@ -6,9 +6,8 @@ struct Candidate {
     s: Sample,
 }
 
-// A corner (barycentric uv) of the triangle a + u e1 + v e2 replaces the start (*uv, *x, *s) where lower.
-fn corner_step(pair: Pair, a: vec3<f32>, e1: vec3<f32>, e2: vec3<f32>, corner: vec2<f32>, uv: ptr<function, vec2<f32>>, x: ptr<function, vec3<f32>>, s: ptr<function, Sample>) {
-    let xi = a + corner.x * e1 + corner.y * e2;
+// Corner xi (barycentric `corner`) of the triangle replaces the start (*uv, *x, *s) where lower.
+fn corner_step(pair: Pair, xi: vec3<f32>, corner: vec2<f32>, uv: ptr<function, vec2<f32>>, x: ptr<function, vec3<f32>>, s: ptr<function, Sample>) {
     let si = sdf_sample(pair, xi);
     if (si.d < (*s).d) {
         *uv = corner;
@@ -41,9 +40,11 @@ fn minimise_on_triangle(
     var s = start.s;
     // Written out, not looped: lavapipe runs a loop's body once more, masked, after its last pass (the
     // exit test at the top of the pass), and here that pass is an SDF sample (see common.wgsl on loops).
-    corner_step(pair, a, e1, e2, vec2<f32>(0.0, 0.0), &uv, &x, &s);
-    corner_step(pair, a, e1, e2, vec2<f32>(1.0, 0.0), &uv, &x, &s);
-    corner_step(pair, a, e1, e2, vec2<f32>(0.0, 1.0), &uv, &x, &s);
+    // The corners themselves: computed as a + u e1 + v e2 they were b and c rounded, or, where the compiler
+    // saw the constant u and v, exactly b and c (it simplifies a + (b - a)); the CPU twin takes them so too.
+    corner_step(pair, a, vec2<f32>(0.0, 0.0), &uv, &x, &s);
+    corner_step(pair, b, vec2<f32>(1.0, 0.0), &uv, &x, &s);
+    corner_step(pair, c, vec2<f32>(0.0, 1.0), &uv, &x, &s);
     let longest = max(g11, max(g22, dot(c - b, c - b)));
     if (longest <= 0.0) {
         return Candidate(x, s);

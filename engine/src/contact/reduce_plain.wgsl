@@ -27,7 +27,7 @@ fn best_patch(c: Cands, pc0: u32, cos: f32) -> vec4<u32> {
 fn assign_step(p: u32, pc0: u32, c: Cands, best: ptr<function, vec4<f32>>, mine: ptr<function, vec4<u32>>) {
     if (p < pc0) {
         let m = patch_data[pd_normal(p)].xyz;
-        let d = c.nx * m.x + c.ny * m.y + c.nz * m.z;
+        let d = dot4(c, m);
         let better = d >= *best;
         *best = select(*best, d, better);
         *mine = select(*mine, vec4<u32>(p), better);

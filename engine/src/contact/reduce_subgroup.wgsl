@@ -45,10 +45,10 @@ fn best_patch(c: Cands, pc0: u32, cos: f32) -> vec4<u32> {
     return mine;
 }
 
-// Patch base + j, read by lane j, against the candidates' normals (dot's order).
+// Patch base + j, read by lane j, against the candidates' normals.
 fn shuffle_step(base: u32, j: u32, lane_n: vec3<f32>, pc0: u32, c: Cands, best: ptr<function, vec4<f32>>, mine: ptr<function, vec4<u32>>) {
     let m = subgroupShuffle(lane_n, j);
-    let d = c.nx * m.x + c.ny * m.y + c.nz * m.z;
+    let d = dot4(c, m);
     let better = (d >= *best) & vec4<bool>(base + j < pc0);
     *best = select(*best, d, better);
     *mine = select(*mine, vec4<u32>(base + j), better);
