@@ -5,6 +5,7 @@
 # held still. Peers come from ../shared/peers (its setup.sh makes the virtual environments; copy the folder
 # if it is read-only); a peer whose environment is missing is skipped and says so.
 # Usage: scripts/bench_peers.sh PEERS_DIR OUT.txt [FACTORY_BENCH] [ASSETS_DIR]
+#   FACTORY_ARGS (environment): extra options for the factory-rs runs (e.g. "--per 4")
 #   PEERS_DIR: folder with mujoco_nutbolt.py, newton_nutbolt.py and their .venv-mujoco / .venv-newton
 #   ASSETS_DIR: Factory's meshes for the peers' M16 runs (default PEERS_DIR/../peer_assets)
 # Output: one line per run, peers' own lines as they print them, factory-rs runs as JSON objects.
@@ -35,8 +36,9 @@ fi
 for w in 1 64 1024; do
   secs=0.25; [ "$w" = 1 ] && secs=1
   for mu in 0.05 0; do
+    # shellcheck disable=SC2086
     "$bin" scene nut-bolt --worlds "$w" --seconds "$secs" --mu "$mu" --segments-per-turn 48 \
-      --descent-iters 4 --json 2>/dev/null >> "$out"
+      --descent-iters 4 ${FACTORY_ARGS:-} --json 2>/dev/null >> "$out"
   done
 done
 toy --n 1 --T 2

@@ -119,6 +119,9 @@ struct SceneArgs {
     /// 4 is faster on lavapipe and keeps other contacts, see docs/BENCHMARKS.md).
     #[arg(long, default_value_t = 1)]
     per: u32,
+    /// Invocations per contact workgroup (32, 64, 128, 256; at most 256 candidates per workgroup).
+    #[arg(long, default_value_t = 64)]
+    workgroup: u32,
     /// Thread columns per turn of the generated nut and bolt meshes (multiple of 12, >= 24).
     #[arg(long, default_value_t = 192)]
     segments_per_turn: usize,
@@ -304,6 +307,7 @@ fn main() -> Result<()> {
                     max_patches: args.patches.unwrap_or(16),
                     iterations: args.descent_iters,
                     candidates_per_invocation: args.per,
+                    workgroup_size: args.workgroup,
                     ..Default::default()
                 },
                 solver: args.solver(&kind.paper_solver()),
@@ -343,6 +347,7 @@ fn main() -> Result<()> {
                     max_patches: args.patches.unwrap_or(64),
                     iterations: args.descent_iters,
                     candidates_per_invocation: args.per,
+                    workgroup_size: args.workgroup,
                     ..Default::default()
                 },
                 solver: args.solver(&paper),

@@ -832,6 +832,7 @@ mod tests {
             max_patches: patches,
             descent_iters: 12,
             candidates_per_invocation: 1,
+            workgroup_size: 64,
             segments_per_turn: 192,
             query_triangles: 11512,
             mu: 0.0,

@@ -235,6 +235,8 @@ pub struct PileReport {
     pub max_patches: u32,
     /// Candidates per invocation of the contact kernels (ContactConfig::candidates_per_invocation).
     pub candidates_per_invocation: u32,
+    /// Invocations per contact workgroup (ContactConfig::workgroup_size).
+    pub workgroup_size: u32,
     pub mu: f32,
     /// Last frame, summed over worlds: contact candidates before reduction, contacts after it, patches,
     /// and pairs with at least one patch.
@@ -531,6 +533,7 @@ fn report(
         solver: (&run.solver).into(),
         max_patches: run.contact.max_patches,
         candidates_per_invocation: run.contact.candidates_per_invocation,
+        workgroup_size: run.contact.workgroup_size,
         mu: run.mu,
         contacts_before: c.candidates,
         contacts_after: c.contacts,

@@ -51,6 +51,8 @@ pub struct NutBoltReport {
     pub descent_iters: u32,
     /// Candidates per invocation of the contact kernels (ContactConfig::candidates_per_invocation).
     pub candidates_per_invocation: u32,
+    /// Invocations per contact workgroup (ContactConfig::workgroup_size).
+    pub workgroup_size: u32,
     pub segments_per_turn: usize,
     /// Query (nut) triangles per pair.
     pub query_triangles: usize,
@@ -143,6 +145,7 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         max_patches: run.contact.max_patches,
         descent_iters: run.contact.iterations,
         candidates_per_invocation: run.contact.candidates_per_invocation,
+        workgroup_size: run.contact.workgroup_size,
         segments_per_turn: run.segments_per_turn,
         query_triangles: nb.nut.mesh.triangle_count(),
         mu: run.mu,
