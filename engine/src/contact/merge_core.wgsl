@@ -15,45 +15,58 @@ fn merge_jobs(lid: u32, pair: Pair, job_base: u32, job_count: u32, out_base: u32
     }
     var first_job = 0u; // the job holding stream index `base`, and its first index
     var first_off = 0u;
-    for (var base = 0u; base < total; base += BATCH) {
+    // Batches and each invocation's entries loop with the exit test at the end of the pass (lavapipe runs
+    // a loop's body once more, masked, after a last pass that ends with the test at the top: here a whole
+    // batch; see common.wgsl on loops), inside a test for an empty stream.
+    if (total > 0u) {
+        var base = 0u;
         loop {
-            let n = job_patch_count[job_base + first_job] * 4u;
-            if (first_off + n > base) {
+            loop {
+                let n = job_patch_count[job_base + first_job] * 4u;
+                if (first_off + n > base) {
+                    break;
+                }
+                first_off += n;
+                first_job++;
+            }
+            var cs = cands_empty();
+            // This invocation's PER stream entries, one after another: the walk to their jobs goes on from
+            // one to the next.
+            var j = first_job;
+            var off = first_off;
+            var q = 0u;
+            loop {
+                let i = base + lid * PER + q;
+                if (i < total) {
+                    loop {
+                        let n = job_patch_count[job_base + j] * 4u;
+                        if (i < off + n) {
+                            break;
+                        }
+                        off += n;
+                        j++;
+                    }
+                    let k = i - off;
+                    let p = job_patches[(job_base + j) * MAX_PATCHES + k / 4u];
+                    let sl = p.slots[k % 4u];
+                    if (sl.w < VALID_BELOW) {
+                        let used = select(0u, 1u, p.slots[0].w < VALID_BELOW) + select(0u, 1u, p.slots[1].w < VALID_BELOW)
+                            + select(0u, 1u, p.slots[2].w < VALID_BELOW) + select(0u, 1u, p.slots[3].w < VALID_BELOW);
+                        let units = p.normal.w / (f32(used) * pair.area_unit);
+                        cands_set(&cs, q, sl, vec4<f32>(p.normal.xyz, f32(max(1u, u32(round(units))))));
+                    }
+                }
+                q += 1u;
+                if (q >= PER) {
+                    break;
+                }
+            }
+            pc = reduce_batch(lid, cs, pc, params.normal_cos, pair.contact_offset, pair.min_separation, true);
+            base += BATCH;
+            if (base >= total) {
                 break;
             }
-            first_off += n;
-            first_job++;
         }
-        var cs = cands_empty();
-        // This invocation's PER stream entries, one after another: the walk to their jobs goes on from
-        // one to the next.
-        var j = first_job;
-        var off = first_off;
-        for (var q = 0u; q < PER; q++) {
-            let i = base + lid * PER + q;
-            if (i < total) {
-                loop {
-                    let n = job_patch_count[job_base + j] * 4u;
-                    if (i < off + n) {
-                        break;
-                    }
-                    off += n;
-                    j++;
-                }
-                let k = i - off;
-                let p = job_patches[(job_base + j) * MAX_PATCHES + k / 4u];
-                let sl = p.slots[k % 4u];
-                if (sl.w < VALID_BELOW) {
-                    var used = 0u;
-                    for (var s = 0u; s < 4u; s++) {
-                        used += select(0u, 1u, p.slots[s].w < VALID_BELOW);
-                    }
-                    let units = p.normal.w / (f32(used) * pair.area_unit);
-                    cands_set(&cs, q, sl, vec4<f32>(p.normal.xyz, f32(max(1u, u32(round(units))))));
-                }
-            }
-        }
-        pc = reduce_batch(lid, cs, pc, params.normal_cos, pair.contact_offset, pair.min_separation, true);
     }
     workgroupBarrier(); // the last batch's slot writes
     for (var p = lid; p < pc; p += WG) {
