@@ -117,8 +117,8 @@ fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: T
     // minimise_on_triangle): a job has triangles, and a batch past them would be one of empty candidates.
     var base = 0u;
     loop {
-        // This invocation's PER triangles, one after another (consecutive triangles, which the model
-        // orders by normal, so that they mostly fall into one patch: see common.wgsl).
+        // This invocation's PER triangles, one after another (consecutive triangles, which the pipelines
+        // order by normal where PER > 1, so that they mostly fall into one patch: see common.wgsl).
         var cs = cands_empty();
         var j = 0u;
         loop {
