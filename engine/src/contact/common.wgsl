@@ -18,10 +18,10 @@
 // candidates reads the patch normals once for all of them in Assign, posts once per round, and in the slot
 // rounds reads a patch's slots once for all its candidates in that patch (a loop over the distinct patches
 // of its candidates; with PER > 1 the pipelines order each job's query triangles by normal so that
-// consecutive ones tend to share a patch, model.rs normal_ordered: 1.07x at 256 worlds). Measured on lavapipe (docs/BENCHMARKS.md, 2026-12-03): PER 4 handles the M16
-// nut-bolt pair's contacts 1.3x faster than PER 1 at 64 invocations, 1.6x with 32. On a GPU it trades
-// parallelism within a workgroup, which the worlds supply, for fewer barriers per candidate (not measured:
-// no GPU here).
+// consecutive ones tend to share a patch, model.rs normal_ordered: 1.07x at 256 worlds). Measured on
+// lavapipe (docs/BENCHMARKS.md, 2026-12-03): PER 4 handles the M16 nut-bolt pair's contacts 1.3x faster than
+// PER 1 at 64 invocations, 1.6x with 32. On a GPU it trades parallelism within a workgroup, which the worlds
+// supply, for fewer barriers per candidate (not measured: no GPU here).
 //
 // Loops: lavapipe (llvmpipe) gives each shader invocation ONE loop counter shared by all its loops,
 // 65535 back edges in total (LP_MAX_TGSI_LOOP_ITERATIONS); past it every loop exits after one pass and
@@ -321,7 +321,7 @@ fn sum4(v: vec4<u32>) -> u32 {
     return (v.x + v.y) + (v.z + v.w);
 }
 
-// The first j with v[j] (v has at least one).
+// The first j with v[j]; 3 if there is none.
 fn first_of(v: vec4<bool>) -> u32 {
     return select(select(select(3u, 2u, v.z), 1u, v.y), 0u, v.x);
 }
@@ -634,7 +634,7 @@ fn slot_round(k: u32, mine: vec4<u32>, c: Cands, code: vec4<u32>, min_sep: f32, 
             let hit = g.sel & (code == vec4<u32>(key & IDX_MASK));
             let own = any(hit);
             if (own || key == 0u) {
-                patch_data[pd_slot(g.p, k)] = select(vec4<f32>(0.0, 0.0, 0.0, EMPTY), cands_pd(c, first_of(hit | vec4<bool>(!own))), own);
+                patch_data[pd_slot(g.p, k)] = select(vec4<f32>(0.0, 0.0, 0.0, EMPTY), cands_pd(c, first_of(hit)), own);
             }
         }
         if (!any(todo)) {

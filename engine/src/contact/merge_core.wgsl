@@ -7,8 +7,8 @@ fn merge_jobs(lid: u32, pair: Pair, job_base: u32, job_count: u32, out_base: u32
     reset_patches(lid);
     var pc = 0u;
     // The jobs' slots form one stream (job by job, 4 slots per patch), cut into batches of BATCH: most
-    // jobs hold far fewer than BATCH slots, and a batch costs the same (its barriers and slot rounds) however few
-    // candidates it holds.
+    // jobs hold far fewer than BATCH slots, and a batch costs the same (its barriers and slot rounds)
+    // however few candidates it holds.
     var total = 0u;
     for (var j = 0u; j < job_count; j++) {
         total += job_patch_count[job_base + j] * 4u;

@@ -43,8 +43,8 @@ pub struct ContactConfig {
     /// At most [`max_chunk_triangles`](Self::max_chunk_triangles).
     pub chunk_triangles: u32,
     /// Invocations per workgroup of the generate and merge kernels (32, 64, 128 or 256); a reduction batch
-    /// holds [`batch_size`](Self::batch_size) candidates, and the CPU twin cuts its batches to that size. Default 64: on lavapipe
-    /// (which runs a workgroup as width/8 coroutines) it is faster (M16 nut-bolt grid SDF: GPU/twin time
+    /// holds [`batch_size`](Self::batch_size) candidates, and the CPU twin cuts its batches to that size.
+    /// Default 64: on lavapipe (which runs a workgroup as width/8 coroutines) it is faster (M16 nut-bolt grid SDF: GPU/twin time
     /// 0.74 vs 1.31 at 1 world, 1.33 vs 1.57 at 64 worlds), except with the analytic bolt SDF at 64
     /// worlds (1.13 vs 0.87); on a GPU 64 is two warps or one wave64.
     pub workgroup_size: u32,
@@ -101,6 +101,13 @@ impl ContactConfig {
         self.workgroup_size * self.candidates_per_invocation
     }
 
+    /// Whether the pipelines order each job's query triangles by normal ([`model::normal_ordered`]): with
+    /// several candidates per invocation, so that an invocation's consecutive candidates tend to share a
+    /// patch.
+    pub fn orders_by_normal(&self) -> bool {
+        self.candidates_per_invocation > 1
+    }
+
     /// Worst-case loop back edges of one `reduce_batch` (common.wgsl) per invocation: the stores of its
     /// candidates, Assign (the portable one's, unrolled by 4 in reduce_plain.wgsl; the subgroup one takes 8
     /// patches per pass), at most one new-patch round per candidate plus the last of each of the two round
@@ -137,7 +144,8 @@ impl ContactConfig {
         // The stream holds at most 4 slots per patch of every job; per batch: the batch loop, the search
         // of its first job, the loop over the invocation's entries, their walk to their jobs (a batch spans
         // at most BATCH / 4 + 1 jobs that hold slots, plus the empty ones between them, counted once below;
-        // one more exit per entry), the 4-slot count per entry, the reduction.
+        // one more exit per entry), 5 per entry for its 4-slot count (a loop before 2026-12-03, written out
+        // since: still counted, on the safe side), the reduction.
         let per = self.candidates_per_invocation;
         let batches = (jobs as u64 * self.max_patches as u64 * 4).div_ceil(self.batch_size() as u64);
         let per_batch = 1 + 1 + (per + 1) + (self.batch_size() / 4 + 2 + per) + 5 * per + self.reduce_batch_loops();

@@ -6,6 +6,7 @@ use crate::mesh::TriMesh;
 use crate::sdf::SdfGrid;
 use bytemuck::{Pod, Zeroable};
 use glam::{Quat, Vec3};
+use std::borrow::Cow;
 use std::sync::Arc;
 
 /// Marks a shape fixed in the world frame (no body).
@@ -334,12 +335,12 @@ impl ContactModel {
                 Some(&(_, f)) => f,
                 None => {
                     let f = (flat.tri_verts.len() / 3) as u32;
-                    let ordered = if by_normal {
-                        normal_ordered(&p.query.triangles, chunk as usize)
+                    let ordered: Cow<[[Vec3; 3]]> = if by_normal {
+                        Cow::Owned(normal_ordered(&p.query.triangles, chunk as usize))
                     } else {
-                        p.query.triangles.clone()
+                        Cow::Borrowed(&p.query.triangles)
                     };
-                    for t in &ordered {
+                    for t in ordered.iter() {
                         flat.tri_verts.extend(t.iter().map(|v| pose4(*v)));
                     }
                     query_first.push((key, f));

@@ -129,7 +129,7 @@ impl ContactPipeline {
         } else {
             cfg.chunk_triangles
         };
-        let flat = model.flatten_ordered(chunk, cfg.candidates_per_invocation > 1)?;
+        let flat = model.flatten_ordered(chunk, cfg.orders_by_normal())?;
         let too_many_jobs = flat.pairs.iter().find(|p| p.job_count > max_jobs);
         if chunk > cfg.max_chunk_triangles() || too_many_jobs.is_some() {
             let triangles = too_many_jobs.map_or(model.max_triangles(), |p| p.tri_count);

@@ -397,7 +397,7 @@ impl CrowdFlat {
         for t in &mut model.templates {
             t.query = std::sync::Arc::new(spatial_order(&t.query));
         }
-        let flat = model.flatten(chunk, contact.candidates_per_invocation > 1)?;
+        let flat = model.flatten(chunk, contact.orders_by_normal())?;
         let jobs_per_pair = flat.pairs.iter().map(|p| p.job_count).max().unwrap_or(1).max(1);
         if chunk > contact.max_chunk_triangles() || jobs_per_pair > contact.max_jobs_per_pair() {
             return Err(EngineError::Config {

@@ -68,6 +68,25 @@ fn resample_rows(world: u32, row0: u32) {
     }
 }
 
+// integrate_velocity (positions false) or integrate_position (true) of every body of the world whose first
+// body is `first`, over a substep h. `positions` is a constant at both call sites, so the untaken call
+// compiles out after inlining (lavapipe would otherwise run it masked). The exit test ends the pass (see
+// sweep); a world has at least one body.
+fn integrate_bodies(first: u32, h: f32, positions: bool) {
+    var b = 0u;
+    loop {
+        if (positions) {
+            integrate_position(first, b, h);
+        } else {
+            integrate_velocity(first, b, h);
+        }
+        b += 1u;
+        if (b >= sp.body_count) {
+            break;
+        }
+    }
+}
+
 @compute @workgroup_size(64)
 fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     let world = gid.x;
@@ -118,14 +137,7 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     // masked sweep after each run of sweeps (2026-12-03, docs/BENCHMARKS.md).
     var sub = 0u;
     loop {
-        var b = 0u;
-        loop {
-            integrate_velocity(first, b, h);
-            b += 1u;
-            if (b >= sp.body_count) {
-                break;
-            }
-        }
+        integrate_bodies(first, h, false);
         sweep(world, row0, h, true, true);
         if (sp.pos_iters > 0u) {
             resample_rows(world, row0);
@@ -138,14 +150,7 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
             }
         }
-        b = 0u;
-        loop {
-            integrate_position(first, b, h);
-            b += 1u;
-            if (b >= sp.body_count) {
-                break;
-            }
-        }
+        integrate_bodies(first, h, true);
         if (sp.vel_iters > 0u) {
             resample_rows(world, row0);
             var it = 0u;
