@@ -68,6 +68,24 @@ fn resample_rows(world: u32, row0: u32) {
     }
 }
 
+// `count` Gauss-Seidel sweeps (position sweeps with the depenetration bias, velocity sweeps without; `bias`
+// a constant at both call sites) on the rows sampled once at the current poses; none for count 0. The exit
+// test ends the pass (see sweep).
+fn sweep_runs(world: u32, row0: u32, h: f32, count: u32, bias: bool) {
+    if (count == 0u) {
+        return;
+    }
+    resample_rows(world, row0);
+    var it = 0u;
+    loop {
+        sweep(world, row0, h, bias, false);
+        it += 1u;
+        if (it >= count) {
+            break;
+        }
+    }
+}
+
 // integrate_velocity (positions false) or integrate_position (true) of every body of the world whose first
 // body is `first`, over a substep h. `positions` is a constant at both call sites, so the untaken call
 // compiles out after inlining (lavapipe would otherwise run it masked). The exit test ends the pass (see
@@ -139,29 +157,9 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     loop {
         integrate_bodies(first, h, false);
         sweep(world, row0, h, true, true);
-        if (sp.pos_iters > 0u) {
-            resample_rows(world, row0);
-            var it = 0u;
-            loop {
-                sweep(world, row0, h, true, false);
-                it += 1u;
-                if (it >= sp.pos_iters) {
-                    break;
-                }
-            }
-        }
+        sweep_runs(world, row0, h, sp.pos_iters, true);
         integrate_bodies(first, h, true);
-        if (sp.vel_iters > 0u) {
-            resample_rows(world, row0);
-            var it = 0u;
-            loop {
-                sweep(world, row0, h, false, false);
-                it += 1u;
-                if (it >= sp.vel_iters) {
-                    break;
-                }
-            }
-        }
+        sweep_runs(world, row0, h, sp.vel_iters, false);
         sub += 1u;
         if (sub >= sp.substeps) {
             break;
