@@ -122,6 +122,10 @@ struct SceneArgs {
     /// Invocations per contact workgroup (32, 64, 128, 256; at most 256 candidates per workgroup).
     #[arg(long, default_value_t = 64)]
     workgroup: u32,
+    /// Run an invocation's four query triangles one after another instead of side by side
+    /// (ContactConfig::interleaved_descent; the same results, for comparing speed).
+    #[arg(long)]
+    sequential_descent: bool,
     /// Thread columns per turn of the generated nut and bolt meshes (multiple of 12, >= 24).
     #[arg(long, default_value_t = 192)]
     segments_per_turn: usize,
@@ -261,6 +265,10 @@ enum Cmd {
         /// Candidates per invocation (1, 2 or 4; at most 256 per workgroup; ContactConfig::candidates_per_invocation).
         #[arg(long, default_value_t = 1)]
         per: u32,
+        /// Run an invocation's four query triangles one after another instead of side by side
+        /// (ContactConfig::interleaved_descent; the same results, for comparing speed).
+        #[arg(long)]
+        sequential_descent: bool,
         /// Projected-gradient iterations per query triangle.
         #[arg(long, default_value_t = 12)]
         descent_iters: u32,
@@ -308,6 +316,7 @@ fn main() -> Result<()> {
                     iterations: args.descent_iters,
                     candidates_per_invocation: args.per,
                     workgroup_size: args.workgroup,
+                    interleaved_descent: !args.sequential_descent,
                     ..Default::default()
                 },
                 solver: args.solver(&kind.paper_solver()),
@@ -348,6 +357,7 @@ fn main() -> Result<()> {
                     iterations: args.descent_iters,
                     candidates_per_invocation: args.per,
                     workgroup_size: args.workgroup,
+                    interleaved_descent: !args.sequential_descent,
                     ..Default::default()
                 },
                 solver: args.solver(&paper),
@@ -434,6 +444,7 @@ fn main() -> Result<()> {
             normal_deg,
             workgroup,
             per,
+            sequential_descent,
             descent_iters,
             segments_per_turn,
             offset_mm,
@@ -496,6 +507,7 @@ fn main() -> Result<()> {
                 normal_cos: normal_deg.to_radians().cos(),
                 workgroup_size: workgroup,
                 candidates_per_invocation: per,
+                interleaved_descent: !sequential_descent,
                 iterations: descent_iters,
                 ..Default::default()
             };
@@ -546,6 +558,7 @@ fn main() -> Result<()> {
                 "normal_bin_deg": normal_deg,
                 "workgroup_size": workgroup,
                 "candidates_per_invocation": per,
+                "interleaved_descent": !sequential_descent,
                 "descent_iters": descent_iters,
                 "contact_offset_mm": offset_mm,
                 "lift_mm": lift * 1e3,

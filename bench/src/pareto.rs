@@ -833,6 +833,7 @@ mod tests {
             descent_iters: 12,
             candidates_per_invocation: 1,
             workgroup_size: 64,
+            interleaved_descent: true,
             segments_per_turn: 192,
             query_triangles: 11512,
             mu: 0.0,

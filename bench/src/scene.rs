@@ -53,6 +53,8 @@ pub struct NutBoltReport {
     pub candidates_per_invocation: u32,
     /// Invocations per contact workgroup (ContactConfig::workgroup_size).
     pub workgroup_size: u32,
+    /// ContactConfig::interleaved_descent.
+    pub interleaved_descent: bool,
     pub segments_per_turn: usize,
     /// Query (nut) triangles per pair.
     pub query_triangles: usize,
@@ -146,6 +148,7 @@ pub fn run_nut_bolt(gpu: &GpuContext, run: &NutBoltRun) -> Result<NutBoltReport>
         descent_iters: run.contact.iterations,
         candidates_per_invocation: run.contact.candidates_per_invocation,
         workgroup_size: run.contact.workgroup_size,
+        interleaved_descent: run.contact.interleaved_descent,
         segments_per_turn: run.segments_per_turn,
         query_triangles: nb.nut.mesh.triangle_count(),
         mu: run.mu,

@@ -149,9 +149,10 @@ impl GenerateKernel {
             kinds,
             subgroups,
         );
+        let constants = [("INTERLEAVED_DESCENT", if cfg.interleaved_descent { 1.0 } else { 0.0 })];
         GenerateKernel {
-            pipeline: compute_pipeline(device, "contact-generate", &source, "generate"),
-            retry: compute_pipeline(device, "contact-generate-retry", &source, "generate_retry"),
+            pipeline: compute_pipeline_with(device, "contact-generate", &source, "generate", &constants),
+            retry: compute_pipeline_with(device, "contact-generate-retry", &source, "generate_retry", &constants),
         }
     }
 

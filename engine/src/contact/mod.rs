@@ -63,6 +63,12 @@ pub struct ContactConfig {
     /// (reduce_subgroup.wgsl; lavapipe has 8: about 1.1x faster there, see docs/BENCHMARKS.md); false: the
     /// portable kernels. The results are bitwise the same either way.
     pub subgroups: bool,
+    /// With 4 candidates per invocation and analytic thread SDFs only: run an invocation's four query
+    /// triangles' descents side by side, as vectors across the triangles (generate_core.wgsl
+    /// `triangles4`); false: one after another. The results are bitwise the same either way; on lavapipe
+    /// side by side is about 1.25x faster (the samples' division and square-root chains overlap; see
+    /// docs/BENCHMARKS.md, 2026-12-03).
+    pub interleaved_descent: bool,
 }
 
 impl Default for ContactConfig {
@@ -75,6 +81,7 @@ impl Default for ContactConfig {
             workgroup_size: 64,
             candidates_per_invocation: 1,
             subgroups: true,
+            interleaved_descent: true,
         }
     }
 }

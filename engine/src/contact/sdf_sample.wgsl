@@ -89,3 +89,40 @@ fn sdf_bind(pair: Pair) {
         analytic_load_revolved(pair.sdf_dims.w);
     }
 }
+
+// Four samples held by component (Sample4, thread.wgsl), for the descent that runs four query triangles side
+// by side (generate_core.wgsl): component k is what sdf_sample returns for point k.
+fn sdf_sample4(pair: Pair, px: vec4<f32>, py: vec4<f32>, pz: vec4<f32>) -> Sample4 {
+    if (HAS_THREAD && pair.sdf_kind == 2u) {
+        return thread_sample4(px, py, pz);
+    }
+    let s0 = sdf_sample(pair, vec3<f32>(px.x, py.x, pz.x));
+    let s1 = sdf_sample(pair, vec3<f32>(px.y, py.y, pz.y));
+    let s2 = sdf_sample(pair, vec3<f32>(px.z, py.z, pz.z));
+    let s3 = sdf_sample(pair, vec3<f32>(px.w, py.w, pz.w));
+    return Sample4(
+        vec4<f32>(s0.d, s1.d, s2.d, s3.d),
+        vec4<f32>(s0.g.x, s1.g.x, s2.g.x, s3.g.x),
+        vec4<f32>(s0.g.y, s1.g.y, s2.g.y, s3.g.y),
+        vec4<f32>(s0.g.z, s1.g.z, s2.g.z, s3.g.z),
+    );
+}
+
+// Four 3-vectors held by component; dot3vv and len3v are WGSL's dot and length on each (see dot2v).
+struct V3x4 {
+    x: vec4<f32>,
+    y: vec4<f32>,
+    z: vec4<f32>,
+}
+
+fn v3x4_at(v: V3x4, k: u32) -> vec3<f32> {
+    return vec3<f32>(v.x[k], v.y[k], v.z[k]);
+}
+
+fn dot3vv(u: V3x4, v: V3x4) -> vec4<f32> {
+    return vec4<f32>(dot(v3x4_at(u, 0u), v3x4_at(v, 0u)), dot(v3x4_at(u, 1u), v3x4_at(v, 1u)), dot(v3x4_at(u, 2u), v3x4_at(v, 2u)), dot(v3x4_at(u, 3u), v3x4_at(v, 3u)));
+}
+
+fn len3v(u: V3x4) -> vec4<f32> {
+    return vec4<f32>(length(v3x4_at(u, 0u)), length(v3x4_at(u, 1u)), length(v3x4_at(u, 2u)), length(v3x4_at(u, 3u)));
+}

@@ -220,3 +220,158 @@ fn thread_sample(p: vec3<f32>) -> Sample {
     }
     return Sample(d, g);
 }
+
+// Four samples (component k: point k; see thread_sample4).
+struct Sample4 {
+    d: vec4<f32>,
+    gx: vec4<f32>,
+    gy: vec4<f32>,
+    gz: vec4<f32>,
+}
+
+// WGSL's dot and length for four 2-vectors held by component (x, y): each is the built-in on
+// its vector, so the same bits as the one-vector code (written out as products and sums, a compiler may
+// round otherwise; see common.wgsl dot4).
+fn dot2v(ux: vec4<f32>, uy: vec4<f32>, v: vec2<f32>) -> vec4<f32> {
+    return vec4<f32>(dot(vec2<f32>(ux.x, uy.x), v), dot(vec2<f32>(ux.y, uy.y), v), dot(vec2<f32>(ux.z, uy.z), v), dot(vec2<f32>(ux.w, uy.w), v));
+}
+
+fn dot2vv(ux: vec4<f32>, uy: vec4<f32>, vx: vec4<f32>, vy: vec4<f32>) -> vec4<f32> {
+    return vec4<f32>(
+        dot(vec2<f32>(ux.x, uy.x), vec2<f32>(vx.x, vy.x)),
+        dot(vec2<f32>(ux.y, uy.y), vec2<f32>(vx.y, vy.y)),
+        dot(vec2<f32>(ux.z, uy.z), vec2<f32>(vx.z, vy.z)),
+        dot(vec2<f32>(ux.w, uy.w), vec2<f32>(vx.w, vy.w)),
+    );
+}
+
+fn len2v(ux: vec4<f32>, uy: vec4<f32>) -> vec4<f32> {
+    return vec4<f32>(length(vec2<f32>(ux.x, uy.x)), length(vec2<f32>(ux.y, uy.y)), length(vec2<f32>(ux.z, uy.z)), length(vec2<f32>(ux.w, uy.w)));
+}
+
+// Four samples at once (component k of each vector: point k), each the same operations as thread_sample's,
+// so the same bits. Why: on lavapipe a sample is a chain of dependent divisions, square roots and the
+// atan2 polynomial run 8 lanes wide, and the CPU waits on each link (the generate kernel's disassembly under
+// perf, 2026-12-03: its hot instructions are those after vdivps, vsqrtps and vroundps); four independent
+// chains side by side let the core overlap them. On a GPU it is the same arithmetic in more registers.
+fn thread_sample4(px: vec4<f32>, py: vec4<f32>, pz: vec4<f32>) -> Sample4 {
+    let pitch = tw(0u);
+    let phase = tw(1u);
+    let pitch_radius = tw(2u);
+    let min_radius = tw(3u);
+    let max_radius = tw(4u);
+    let rho = max(sqrt(px * px + py * py), vec4<f32>(1.0e-9));
+    let rx = px / rho;
+    let ry = py / rho;
+    let theta = atan2(py, px);
+    let lead = thr.lead;
+    let u = pz - phase - lead * theta;
+    let w = u - pitch * round(u / pitch);
+    let s = abs(w);
+    let c1 = seg_closest_from4(s, rho, thr.pa, thr.ab, thr.len2.x);
+    let c2 = seg_closest_from4(s, rho, thr.pb, thr.bc, thr.len2.y);
+    let c3 = seg_closest_from4(s, rho, thr.pc, thr.cd, thr.len2.z);
+    let d1 = dot2vv(s - c1.cx, rho - c1.cy, s - c1.cx, rho - c1.cy);
+    let d2 = dot2vv(s - c2.cx, rho - c2.cy, s - c2.cx, rho - c2.cy);
+    let d3 = dot2vv(s - c3.cx, rho - c3.cy, s - c3.cx, rho - c3.cy);
+    let m2 = (d2 < d1) & (d2 <= d3);
+    let m3 = !m2 & (d3 < d1) & (d3 < d2);
+    let cx = select(select(c1.cx, c3.cx, m3), c2.cx, m2);
+    let cy = select(select(c1.cy, c3.cy, m3), c2.cy, m2);
+    let interior = select(select(c1.interior, c3.interior, m3), c2.interior, m2);
+    let fx = select(vec4<f32>(0.0), vec4<f32>(thr.flank_n.x), m2);
+    let fy = select(vec4<f32>(1.0), vec4<f32>(thr.flank_n.y), m2);
+    let r_at = clamp(pitch_radius + SQRT3_T * (thr.quarter - s), vec4<f32>(min_radius), vec4<f32>(max_radius));
+    // signed_from_closest
+    let ex = s - cx;
+    let ey = rho - cy;
+    let len = len2v(ex, ey);
+    let sgn = select(vec4<f32>(1.0), vec4<f32>(-1.0), rho < r_at);
+    let own = interior | (len <= vec4<f32>(1.0e-12));
+    let k = sgn / len;
+    let s2d = sgn * len;
+    let s2x = select(ex * k, fx, own);
+    let s2y = select(ey * k, fy, own);
+    let sign_w = select(vec4<f32>(1.0), vec4<f32>(-1.0), w < vec4<f32>(0.0));
+    let tx = -ry;
+    let ty = rx;
+    let lr = lead / rho;
+    let q = s2x * sign_w;
+    var d = s2d;
+    var gx = rx * s2y + (0.0 - tx * lr) * q;
+    var gy = ry * s2y + (0.0 - ty * lr) * q;
+    var gz = 0.0 * s2y + (1.0 - 0.0 * lr) * q;
+    let below = tw(5u) - pz;
+    let mb = below > d;
+    d = select(d, below, mb);
+    gx = select(gx, vec4<f32>(0.0), mb);
+    gy = select(gy, vec4<f32>(0.0), mb);
+    gz = select(gz, vec4<f32>(-1.0), mb);
+    let above = pz - tw(6u);
+    let ma = above > d;
+    d = select(d, above, ma);
+    gx = select(gx, vec4<f32>(0.0), ma);
+    gy = select(gy, vec4<f32>(0.0), ma);
+    gz = select(gz, vec4<f32>(1.0), ma);
+    // The head, where it may win (see thread_sample).
+    let head_slab = abs(pz - thr.head_zc) - thr.head_half;
+    let mh = vec4<bool>(tw(7u) != 0.0) & (head_slab < d + HEAD_SKIP_MARGIN);
+    if (any(mh)) {
+        let h = hex_prism_sample4(tw(8u), thr.head_half_edge, tw(9u), tw(10u), px, py, pz);
+        let take = mh & (h.d < d);
+        d = select(d, h.d, take);
+        gx = select(gx, h.gx, take);
+        gy = select(gy, h.gy, take);
+        gz = select(gz, h.gz, take);
+    }
+    return Sample4(d, gx, gy, gz);
+}
+
+struct Closest4 {
+    cx: vec4<f32>,
+    cy: vec4<f32>,
+    interior: vec4<bool>,
+}
+
+// seg_closest_from for four points (xs, xr): the same operations.
+fn seg_closest_from4(xs: vec4<f32>, xr: vec4<f32>, a: vec2<f32>, ab: vec2<f32>, len2: f32) -> Closest4 {
+    let t = clamp(dot2v(xs - a.x, xr - a.y, ab) / len2, vec4<f32>(0.0), vec4<f32>(1.0));
+    return Closest4(a.x + ab.x * t, a.y + ab.y * t, (t > vec4<f32>(0.0)) & (t < vec4<f32>(1.0)));
+}
+
+// hex_prism_sample for four points: the same operations.
+fn hex_prism_sample4(apothem: f32, half_edge: f32, z0: f32, z1: f32, px: vec4<f32>, py: vec4<f32>, pz: vec4<f32>) -> Sample4 {
+    let qx = abs(px);
+    let qy = abs(py);
+    let k = vec2<f32>(-0.5, 0.5 * SQRT3_T);
+    let kq = dot2v(qx, qy, k);
+    let above = kq > vec4<f32>(0.0);
+    let rx = select(qx, qx - 2.0 * kq * k.x, above);
+    let ry = select(qy, qy - 2.0 * kq * k.y, above);
+    let dvx = rx - apothem;
+    let dvy = ry - clamp(ry, vec4<f32>(-half_edge), vec4<f32>(half_edge));
+    let beside = abs(ry) <= vec4<f32>(half_edge);
+    let len = len2v(dvx, dvy);
+    let d2 = select(len, dvx, beside);
+    let il = 1.0 / len;
+    let grx = select(dvx * il, vec4<f32>(1.0), beside);
+    let gry = select(dvy * il, vec4<f32>(0.0), beside);
+    let kg = dot2v(grx, gry, k);
+    let gqx = select(grx, grx - 2.0 * kg * k.x, above);
+    let gqy = select(gry, gry - 2.0 * kg * k.y, above);
+    let g2x = select(gqx, -gqx, px < vec4<f32>(0.0));
+    let g2y = select(gqy, -gqy, py < vec4<f32>(0.0));
+    let zc = 0.5 * (z0 + z1);
+    let dz = abs(pz - zc) - 0.5 * (z1 - z0);
+    let sz = select(vec4<f32>(1.0), vec4<f32>(-1.0), pz < vec4<f32>(zc));
+    let corner = (d2 > vec4<f32>(0.0)) & (dz > vec4<f32>(0.0));
+    let l3 = sqrt(d2 * d2 + dz * dz);
+    let inv = 1.0 / l3;
+    let side = !corner & (d2 > dz);
+    let cap = !corner & !side;
+    let d = select(select(l3, d2, side), dz, cap);
+    let gx = select(select(g2x * (d2 * inv), g2x, side), vec4<f32>(0.0), cap);
+    let gy = select(select(g2y * (d2 * inv), g2y, side), vec4<f32>(0.0), cap);
+    let gz = select(select(sz * (dz * inv), vec4<f32>(0.0), side), sz, cap);
+    return Sample4(d, gx, gy, gz);
+}
