@@ -529,7 +529,14 @@ fn main() -> Result<()> {
                 let t = Instant::now();
                 let reps = 3;
                 for _ in 0..reps {
-                    std::hint::black_box(contacts_cpu(&pipe.flat, 2, worlds, &poses, &cfg));
+                    std::hint::black_box(contacts_cpu(
+                        &pipe.flat,
+                        2,
+                        worlds,
+                        &poses,
+                        &cfg,
+                        !pipe.flat.single_job_pairs(),
+                    ));
                 }
                 Some(t.elapsed().as_secs_f64() * 1e3 / reps as f64)
             } else {

@@ -173,8 +173,14 @@ fn gpu_cpu_parity_on_seeded_triangles() {
         poses.push(TransformGpu::new(t, Quat::from_rotation_z(0.01 * w as f32)));
         poses.push(TransformGpu::new(Vec3::ZERO, Quat::IDENTITY));
     }
-    for cfg in [ContactConfig::default(), ContactConfig { max_patches: 16, chunk_triangles: 512, ..Default::default() }]
-    {
+    // Several jobs per pair (merged), and one job per pair, whose patches are final (no merge pass).
+    for cfg in [
+        ContactConfig::default(),
+        ContactConfig { max_patches: 16, chunk_triangles: 512, ..Default::default() },
+        ContactConfig { chunk_triangles: 1536, ..Default::default() },
+    ] {
+        let single = model.flatten(cfg.chunk_triangles.max(256)).unwrap().single_job_pairs();
+        assert_eq!(single, cfg.chunk_triangles == 1536, "{cfg:?}");
         let (gpu, cpu) = run(&model, &poses, worlds, &cfg);
         for w in 0..worlds as usize {
             // Candidate counts can differ only by a borderline triangle or two (f32 rounding at the offset).

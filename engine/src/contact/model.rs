@@ -228,6 +228,19 @@ pub struct FlatModel {
     pub sdf_values: Vec<u32>,
 }
 
+impl FlatModel {
+    /// Whether every pair's query triangles form one job (job i being pair i's): then a pair's patches
+    /// come from one workgroup's reduction, and the second level (merge.wgsl, which combines the patches of
+    /// a pair's jobs) is left out: the pipeline's generate pass writes the final patches, and the CPU twin
+    /// skips merge_cpu likewise. Run on one job's patches the merge would only re-order them, re-pick the
+    /// same contacts into slots and re-round the patch areas from per-contact shares (the nut-bolt pair's
+    /// contact handling at 256 worlds: about 14% of it, 2026-12-03).
+    pub fn single_job_pairs(&self) -> bool {
+        self.jobs.len() == self.pairs.len()
+            && self.pairs.iter().enumerate().all(|(i, p)| p.job_count == 1 && p.job_first == i as u32)
+    }
+}
+
 /// Query shapes of at most this many triangles (one batch at the default settings; a box has 20) keep their
 /// order: their candidates are few, and among equally deep ones (a face flat on another) the order decides
 /// the tie-breaks, which the GPU and the CPU twin, rounding differently, then resolve differently (a settling

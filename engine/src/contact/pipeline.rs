@@ -75,7 +75,9 @@ pub struct ContactPipeline {
     pub sdf_values: wgpu::Buffer,
     /// Body poses, shape [world_count * body_count]; written by the host or the solver.
     pub body_q: wgpu::Buffer,
-    /// Per-job patches, shape [world_count * job_count * max_patches].
+    /// Per-job patches, shape [world_count * job_count * max_patches]; with one job per pair (no merge
+    /// pass: FlatModel::single_job_pairs) the same buffer as `patches` (and `job_patch_count` as
+    /// `patch_counts`).
     pub job_patches: wgpu::Buffer,
     pub job_patch_count: wgpu::Buffer,
     /// Candidates per pair and world before reduction, shape [world_count * pair_count].
@@ -181,14 +183,23 @@ impl ContactPipeline {
         let identity =
             vec![TransformGpu::new(Vec3::ZERO, Quat::IDENTITY); (world_count * model.body_count.max(1)) as usize];
         let body_q = gpu.storage_buffer("body_q", &identity, none);
-        let job_patches = gpu.storage_buffer_zeroed("job_patches", job_patch_bytes);
-        let job_patch_count = gpu.storage_buffer_zeroed("job_patch_count", 4 * (world_count * job_count) as u64);
         let pair_candidates = gpu.storage_buffer_zeroed("pair_candidates", 4 * (world_count * pair_count) as u64);
         let patches = gpu.storage_buffer_zeroed(
             "patches",
             world_count as u64 * pair_count as u64 * cfg.max_patches as u64 * patch_bytes,
         );
         let patch_counts = gpu.storage_buffer_zeroed("patch_counts", 4 * (world_count * pair_count) as u64);
+        // One job per pair: generate writes the final patches (job j is pair j, so the layouts agree) and no
+        // merge runs (FlatModel::single_job_pairs).
+        let merges = !flat.single_job_pairs();
+        let (job_patches, job_patch_count) = if merges {
+            (
+                gpu.storage_buffer_zeroed("job_patches", job_patch_bytes),
+                gpu.storage_buffer_zeroed("job_patch_count", 4 * (world_count * job_count) as u64),
+            )
+        } else {
+            (patches.clone(), patch_counts.clone())
+        };
         let kinds = super::generate::SdfKinds::of(&flat.pairs);
         let subgroups = super::generate::reduce_with_subgroups(gpu, cfg);
         let generate = GenerateKernel::new(dev, cfg, kinds, subgroups);
@@ -274,7 +285,9 @@ impl ContactPipeline {
             self.flat.jobs.len() as u32,
             self.world_count,
         );
-        self.merge.dispatch(&mut pass, refs(&self.merge_groups), self.flat.pairs.len() as u32, self.world_count);
+        if !self.flat.single_job_pairs() {
+            self.merge.dispatch(&mut pass, refs(&self.merge_groups), self.flat.pairs.len() as u32, self.world_count);
+        }
         let pair_count = self.flat.pairs.len() as u32;
         self.normals.dispatch(
             &mut pass,
@@ -315,17 +328,21 @@ impl ContactPipeline {
 
     /// The CPU twin of [`encode`](Self::encode) + [`read`](Self::read) for the given poses.
     pub fn contacts_cpu(&self, body_q: &[TransformGpu]) -> ContactsHost {
-        contacts_cpu(&self.flat, self.body_count, self.world_count, body_q, &self.cfg)
+        let merges = !self.flat.single_job_pairs();
+        contacts_cpu(&self.flat, self.body_count, self.world_count, body_q, &self.cfg, merges)
     }
 }
 
 /// Plain-Rust contact generation and reduction for every pair and world (parallel over worlds' jobs).
+/// `merges`: whether the pipeline twinned runs the second level (merge_cpu) on every pair; false only where
+/// every pair is one job (ContactPipeline with FlatModel::single_job_pairs), whose patches are then final.
 pub fn contacts_cpu(
     flat: &FlatModel,
     body_count: u32,
     world_count: u32,
     body_q: &[TransformGpu],
     cfg: &ContactConfig,
+    merges: bool,
 ) -> ContactsHost {
     use rayon::prelude::*;
     let xf: Vec<Xf> = body_q.iter().map(|t| t.xf()).collect();
@@ -339,8 +356,13 @@ pub fn contacts_cpu(
                 .iter()
                 .map(|job| generate_job_cpu(flat, job, &xf, body_count, world, cfg))
                 .collect();
-            let slices: Vec<&[PatchGpu]> = outs.iter().map(|o| o.patches.as_slice()).collect();
-            let merged = merge_cpu(p, &slices, cfg);
+            let merged = if !merges {
+                assert_eq!(outs.len(), 1, "without the merge pass every pair is one job");
+                outs[0].patches.clone()
+            } else {
+                let slices: Vec<&[PatchGpu]> = outs.iter().map(|o| o.patches.as_slice()).collect();
+                merge_cpu(p, &slices, cfg)
+            };
             let patches =
                 to_patches(&merged, |i, k| contact_normal_cpu(flat, pair, &merged[i], k, &xf, body_count, world));
             (patches, outs.iter().map(|o| o.candidates).sum())

@@ -687,7 +687,9 @@ impl CrowdCpu {
                 self.world_flat.pairs.push(PairGpu { job_first, job_count, ..record });
             }
             let range = w * n..(w + 1) * n;
-            let contacts = contacts_cpu(&self.world_flat, n as u32, 1, &state.body_q[range.clone()], &self.contact);
+            // The crowd kernels merge every near pair's jobs (crowd/merge.wgsl), one job or several.
+            let contacts =
+                contacts_cpu(&self.world_flat, n as u32, 1, &state.body_q[range.clone()], &self.contact, true);
             let patches: usize = contacts.patches.iter().map(|p| p.len()).sum();
             let (old_pairs, mut warm) = std::mem::take(&mut self.warm[w]);
             if patches > self.cfg.max_patches_per_world as usize {
