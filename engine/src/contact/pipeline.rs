@@ -1,5 +1,6 @@
-//! The contact pipeline on the GPU: model buffers uploaded once, two dispatches per frame (generate, then
-//! merge), results left on the device for the solver. [`ContactPipeline::contacts_cpu`] runs the CPU twin.
+//! The contact pipeline on the GPU: model buffers uploaded once, one or two dispatches per frame (generate,
+//! then merge where a pair has several jobs), results left on the device for the solver; per-contact normals
+//! are computed when the host reads the contacts back. [`ContactPipeline::contacts_cpu`] runs the CPU twin.
 
 use super::generate::{generate_job_cpu, params, GenerateKernel, Xf};
 use super::merge::{merge_cpu, MergeKernel};
@@ -87,7 +88,7 @@ pub struct ContactPipeline {
     /// Patches in use per pair and world, shape [world_count * pair_count].
     pub patch_counts: wgpu::Buffer,
     /// Outward normal of the SDF shape at each reduced contact (xyz, w unused), world frame,
-    /// shape [world_count * pair_count * max_patches * 4].
+    /// shape [world_count * pair_count * max_patches * 4]; written by [`read`](Self::read).
     pub contact_normals: wgpu::Buffer,
     normals: NormalsKernel,
     normals_groups: [wgpu::BindGroup; 3],
@@ -271,7 +272,10 @@ impl ContactPipeline {
         }
     }
 
-    /// Records one frame of contact handling (clear counters, generate, merge) into `encoder`.
+    /// Records one frame of contact handling (clear counters, generate, merge) into `encoder`. The
+    /// per-contact normals that [`read`](Self::read) returns are not part of it: the solver samples its
+    /// own at every row, so a stepped frame does not pay for them (normals.wgsl: 4-5% of the nut-bolt
+    /// pair's contact handling, 2026-12-03); `read` computes them.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
         encoder.clear_buffer(&self.pair_candidates, 0, None);
         super::generate::clear_retry(encoder, &self.retry_jobs, &self.retry_args);
@@ -288,14 +292,6 @@ impl ContactPipeline {
         if !self.flat.single_job_pairs() {
             self.merge.dispatch(&mut pass, refs(&self.merge_groups), self.flat.pairs.len() as u32, self.world_count);
         }
-        let pair_count = self.flat.pairs.len() as u32;
-        self.normals.dispatch(
-            &mut pass,
-            refs(&self.normals_groups),
-            self.cfg.max_patches,
-            pair_count,
-            self.world_count,
-        );
     }
 
     /// Encodes and submits one frame.
@@ -305,8 +301,24 @@ impl ContactPipeline {
         gpu.queue.submit([enc.finish()]);
     }
 
-    /// Reads the reduced contacts back (waits for the GPU).
+    /// Reads the reduced contacts back (waits for the GPU), with each contact's normal: the SDF shape's
+    /// outward normal at the contact, sampled now (normals.wgsl) at the current body poses, which are those
+    /// the contacts were generated at unless a solver step moved the bodies since.
     pub fn read(&self, gpu: &GpuContext) -> ContactsHost {
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass =
+                enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("normals"), timestamp_writes: None });
+            let pair_count = self.flat.pairs.len() as u32;
+            self.normals.dispatch(
+                &mut pass,
+                refs(&self.normals_groups),
+                self.cfg.max_patches,
+                pair_count,
+                self.world_count,
+            );
+        }
+        gpu.queue.submit([enc.finish()]);
         let raw: Vec<PatchGpu> = gpu.read_buffer(&self.patches);
         let counts: Vec<u32> = gpu.read_buffer(&self.patch_counts);
         let candidates: Vec<u32> = gpu.read_buffer(&self.pair_candidates);
