@@ -117,44 +117,45 @@ fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: T
     // minimise_on_triangle): a job has triangles, and a batch past them would be one of empty candidates.
     var base = 0u;
     loop {
-        // This invocation's PER triangles, one after another (consecutive triangles, which the pipelines
-        // order by normal where PER > 1, so that they mostly fall into one patch: see common.wgsl).
+        // This invocation's PER triangles, one after another, or with VEC4_DESCENT four side by side
+        // (consecutive triangles, which the pipelines order by normal where PER > 1, so that they mostly
+        // fall into one patch: see common.wgsl).
         var cs = cands_empty();
         if (VEC4_DESCENT) {
             cs = triangles4(pair, lid, base, tri_first, tri_count, b_from_a, offset, &found);
         } else {
-        var j = 0u;
-        loop {
-            let t = base + lid * PER + j;
-            if (t < tri_count) {
-                let v = (tri_first + t) * 3u;
-                let a = xf_point(b_from_a, tri_verts[v].xyz);
-                let b = xf_point(b_from_a, tri_verts[v + 1u].xyz);
-                let c = xf_point(b_from_a, tri_verts[v + 2u].xyz);
-                // Cull: the SDF at the centroid bounds the distance of the whole triangle (1-Lipschitz,
-                // plus one voxel for interpolation error).
-                // (Written as the descent's barycentric start, which reuses this sample: same rounding.)
-                let centroid = a + (1.0 / 3.0) * (b - a) + (1.0 / 3.0) * (c - a);
-                let reach = sqrt(max(dot(a - centroid, a - centroid), max(dot(b - centroid, b - centroid), dot(c - centroid, c - centroid))));
-                let sc = sdf_sample(pair, centroid);
-                let slack = select(pair.sdf_origin.w, 0.0, pair.sdf_kind == 1u);
-                if (sc.d - reach - pair.radius - slack <= offset) {
-                    let m = minimise_on_triangle(pair, a, b, c, Candidate(centroid, sc), params.iterations);
-                    let depth = m.s.d - pair.radius;
-                    let glen = length(m.s.g);
-                    if (depth < offset && glen > 0.0) {
-                        let n = m.s.g / glen;
-                        let area = 0.5 * length(cross(b - a, c - a));
-                        cands_set(&cs, j, vec4<f32>(m.x - pair.radius * n, depth), vec4<f32>(n, f32(max(1u, u32(round(area / pair.area_unit))))));
-                        found += 1u;
+            var j = 0u;
+            loop {
+                let t = base + lid * PER + j;
+                if (t < tri_count) {
+                    let v = (tri_first + t) * 3u;
+                    let a = xf_point(b_from_a, tri_verts[v].xyz);
+                    let b = xf_point(b_from_a, tri_verts[v + 1u].xyz);
+                    let c = xf_point(b_from_a, tri_verts[v + 2u].xyz);
+                    // Cull: the SDF at the centroid bounds the distance of the whole triangle (1-Lipschitz,
+                    // plus one voxel for interpolation error).
+                    // (Written as the descent's barycentric start, which reuses this sample: same rounding.)
+                    let centroid = a + (1.0 / 3.0) * (b - a) + (1.0 / 3.0) * (c - a);
+                    let reach = sqrt(max(dot(a - centroid, a - centroid), max(dot(b - centroid, b - centroid), dot(c - centroid, c - centroid))));
+                    let sc = sdf_sample(pair, centroid);
+                    let slack = select(pair.sdf_origin.w, 0.0, pair.sdf_kind == 1u);
+                    if (sc.d - reach - pair.radius - slack <= offset) {
+                        let m = minimise_on_triangle(pair, a, b, c, Candidate(centroid, sc), params.iterations);
+                        let depth = m.s.d - pair.radius;
+                        let glen = length(m.s.g);
+                        if (depth < offset && glen > 0.0) {
+                            let n = m.s.g / glen;
+                            let area = 0.5 * length(cross(b - a, c - a));
+                            cands_set(&cs, j, vec4<f32>(m.x - pair.radius * n, depth), vec4<f32>(n, f32(max(1u, u32(round(area / pair.area_unit))))));
+                            found += 1u;
+                        }
                     }
                 }
+                j += 1u;
+                if (j >= PER) {
+                    break;
+                }
             }
-            j += 1u;
-            if (j >= PER) {
-                break;
-            }
-        }
         }
         pc = reduce_batch(lid, cs, pc, params.normal_cos, offset, pair.min_separation, evicting);
         if (red_overflow) {
@@ -187,7 +188,8 @@ fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: T
 // triangle k), each by the same operations as minimise_on_triangle and the cull of generate_job, so the
 // same candidates to the last bit. Used where every SDF of the model is the analytic thread (VEC4_DESCENT):
 // its samples are long chains of dependent divisions and square roots, and on lavapipe four independent
-// chains side by side run about twice as fast as one after another (thread.wgsl thread_sample4). With grid
+// chains side by side overlap (thread.wgsl thread_sample4): the nut-bolt pair's contact handling 1.24x
+// faster (docs/BENCHMARKS.md, 2026-12-03). With grid
 // SDFs lavapipe reads every voxel lane by lane anyway, and a culled triangle in one batch slot would cost
 // the other three their skip, so the piles keep the one-triangle path.
 // INTERLEAVED_DESCENT: ContactConfig::interleaved_descent (set by generate.rs; the crowd kernels, whose SDFs
