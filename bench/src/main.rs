@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use factory_assets::{nut_bolt, peg_hole, Fit, IsoSize, PegHoleOptions, PegSize, ThreadOptions};
 use factory_bench::contact_scene::{min_depth, ContactScene, PartPair};
-use factory_engine::contact::{contacts_cpu, ContactConfig, ContactPipeline};
+use factory_engine::contact::{ContactConfig, ContactPipeline};
 use factory_engine::gpu::GpuContext;
 use factory_engine::mesh::TriMesh;
 use factory_engine::sdf::cache::SdfCache;
@@ -529,14 +529,7 @@ fn main() -> Result<()> {
                 let t = Instant::now();
                 let reps = 3;
                 for _ in 0..reps {
-                    std::hint::black_box(contacts_cpu(
-                        &pipe.flat,
-                        2,
-                        worlds,
-                        &poses,
-                        &cfg,
-                        !pipe.flat.single_job_pairs(),
-                    ));
+                    std::hint::black_box(pipe.contacts_cpu(&poses));
                 }
                 Some(t.elapsed().as_secs_f64() * 1e3 / reps as f64)
             } else {

@@ -1,9 +1,9 @@
 // Per-contact normals (dispatched when the host reads the contacts: ContactPipeline::read): patches share
 // one normal for binning and for friction, but each reduced contact also gets the SDF shape's own outward
 // normal at its point, so a contact on a curved surface (a helical flank, a sphere) pushes along its local
-// normal. One invocation
-// per contact slot: the contact point (on shape a) is moved back by the query radius along the patch
-// normal, taken into shape b's frame, and the normalised SDF gradient there is rotated back to the world.
+// normal. One invocation per contact slot: the contact point (on shape a) is moved back by the query radius
+// along the patch normal, taken into shape b's frame, and the normalised SDF gradient there is rotated back
+// to the world.
 // Only reduced contacts are sampled (at most 4 x max_patches per pair), yet on lavapipe that was 4-5% of the
 // nut-bolt pair's contact handling per frame (2026-12-03), which the solver, sampling its own, did not need.
 

@@ -69,7 +69,9 @@ pub struct ContactPipeline {
     pub body_count: u32,
     pub world_count: u32,
     generate: GenerateKernel,
-    merge: MergeKernel,
+    /// The merge pass and its bind groups; `None` where every pair is one job (FlatModel::single_job_pairs),
+    /// whose patches generate writes as final.
+    merge: Option<(MergeKernel, [wgpu::BindGroup; 3])>,
     /// Shape pairs (PairGpu), shared by all worlds.
     pub pairs: wgpu::Buffer,
     /// SDF values and analytic parameters (see model.rs).
@@ -99,7 +101,6 @@ pub struct ContactPipeline {
     pub retry_jobs: wgpu::Buffer,
     /// The retry pass's indirect dispatch size.
     retry_args: wgpu::Buffer,
-    merge_groups: [wgpu::BindGroup; 3],
 }
 
 impl ContactPipeline {
@@ -204,7 +205,6 @@ impl ContactPipeline {
         let kinds = super::generate::SdfKinds::of(&flat.pairs);
         let subgroups = super::generate::reduce_with_subgroups(gpu, cfg);
         let generate = GenerateKernel::new(dev, cfg, kinds, subgroups);
-        let merge = MergeKernel::new(dev, cfg, subgroups);
         let normals = NormalsKernel::new(dev, cfg, kinds);
         let contact_normals = gpu.storage_buffer_zeroed(
             "contact_normals",
@@ -226,12 +226,16 @@ impl ContactPipeline {
             group(rp, 1, &[&body_q]),
             group(rp, 2, &[&job_patches, &job_patch_count, &pair_candidates, &retry_jobs]),
         ];
-        let mp = &merge.pipeline;
-        let merge_groups = [
-            group(mp, 0, &[&uniform, &pairs]),
-            group(mp, 1, &[&job_patches, &job_patch_count]),
-            group(mp, 2, &[&patches, &patch_counts]),
-        ];
+        let merge = merges.then(|| {
+            let merge = MergeKernel::new(dev, cfg, subgroups);
+            let mp = &merge.pipeline;
+            let groups = [
+                group(mp, 0, &[&uniform, &pairs]),
+                group(mp, 1, &[&job_patches, &job_patch_count]),
+                group(mp, 2, &[&patches, &patch_counts]),
+            ];
+            (merge, groups)
+        });
         let np = &normals.pipeline;
         let normals_groups = [
             group(np, 0, &[&uniform, &pairs, &sdf_values]),
@@ -255,7 +259,6 @@ impl ContactPipeline {
             retry_groups,
             retry_jobs,
             retry_args,
-            merge_groups,
             contact_normals,
             normals,
             normals_groups,
@@ -289,8 +292,8 @@ impl ContactPipeline {
             self.flat.jobs.len() as u32,
             self.world_count,
         );
-        if !self.flat.single_job_pairs() {
-            self.merge.dispatch(&mut pass, refs(&self.merge_groups), self.flat.pairs.len() as u32, self.world_count);
+        if let Some((merge, groups)) = &self.merge {
+            merge.dispatch(&mut pass, refs(groups), self.flat.pairs.len() as u32, self.world_count);
         }
     }
 
@@ -340,8 +343,7 @@ impl ContactPipeline {
 
     /// The CPU twin of [`encode`](Self::encode) + [`read`](Self::read) for the given poses.
     pub fn contacts_cpu(&self, body_q: &[TransformGpu]) -> ContactsHost {
-        let merges = !self.flat.single_job_pairs();
-        contacts_cpu(&self.flat, self.body_count, self.world_count, body_q, &self.cfg, merges)
+        contacts_cpu(&self.flat, self.body_count, self.world_count, body_q, &self.cfg, self.merge.is_some())
     }
 }
 
