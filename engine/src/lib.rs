@@ -13,6 +13,7 @@ pub mod mesh;
 pub use error::{EngineError, Result};
 /// The wgpu the engine is built on (callers that record their own command encoders use this one).
 pub use wgpu;
+pub mod articulation;
 pub mod builder;
 pub mod contact;
 pub mod crowd;
