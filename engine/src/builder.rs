@@ -94,6 +94,66 @@ impl ModelBuilder {
         BodyHandle(self.dynamic.len() as u32 - 1)
     }
 
+    /// A body that is link `link` of the world's articulation, its centre of mass at `com` [m] in the link
+    /// frame: it moves with the joints, and contact impulses on it act through the articulation
+    /// (solver::step_cpu_articulated). Its shapes collide like those of a moving body.
+    pub fn add_articulated_body(&mut self, link: u32, com: Vec3) -> BodyHandle {
+        self.bodies.add_articulated(link, com);
+        self.dynamic.push(false);
+        BodyHandle(self.dynamic.len() as u32 - 1)
+    }
+
+    /// Adds link `link_name` of `articulation` as a link body with the collision shapes its URDF link
+    /// carries (boxes, spheres, capsules as themselves; meshes loaded, tagged with their `<sdf>`), each with
+    /// `friction` and `contact_offset` [m]. Cylinders are refused (the contact pipeline has no cylinder;
+    /// use a capsule), naming the link and the file.
+    pub fn add_urdf_link(
+        &mut self,
+        urdf: &crate::urdf::UrdfModel,
+        articulation: &crate::articulation::ArticulationModel,
+        link_name: &str,
+        friction: f32,
+        contact_offset: f32,
+    ) -> Result<(BodyHandle, Vec<ShapeHandle>)> {
+        use crate::urdf::Geometry;
+        let missing = || EngineError::Asset {
+            path: urdf.source.clone(),
+            message: format!("no link '{link_name}' in the articulation '{}'", articulation.name),
+        };
+        let link = articulation.link_index(link_name).ok_or_else(missing)?;
+        let ul = urdf.link(link_name).ok_or_else(missing)?;
+        let body = self.add_articulated_body(link, articulation.link_com[link as usize]);
+        let mut shapes = Vec::new();
+        for c in &ul.collisions {
+            let geometry = match &c.geometry {
+                Geometry::Box { half_extents } => ShapeGeometry::Box { half_extents: *half_extents },
+                Geometry::Sphere { radius } => ShapeGeometry::Sphere { radius: *radius },
+                Geometry::Capsule { radius, length } => {
+                    ShapeGeometry::Capsule { radius: *radius, half_length: 0.5 * length }
+                }
+                Geometry::Mesh { .. } => ShapeGeometry::Mesh {
+                    mesh: std::sync::Arc::new(crate::urdf::load_collision_mesh(c)?),
+                    sdf_resolution: c.sdf_resolution,
+                },
+                Geometry::Cylinder { .. } => {
+                    return Err(EngineError::Asset {
+                        path: urdf.source.clone(),
+                        message: format!(
+                            "link '{link_name}': a cylinder collision shape is not supported (box, sphere, \
+                             capsule or mesh)"
+                        ),
+                    })
+                }
+            };
+            let s = self.add_shape(Some(body), (c.origin.translation, c.origin.rotation), geometry);
+            let def = self.shape_mut(s);
+            def.friction = friction;
+            def.contact_offset = contact_offset;
+            shapes.push(s);
+        }
+        Ok((body, shapes))
+    }
+
     /// A kinematic body: moved by the velocity set in the state, unaffected by gravity and contacts.
     pub fn add_kinematic_body(&mut self) -> BodyHandle {
         self.bodies.add_kinematic();
@@ -141,7 +201,10 @@ impl ModelBuilder {
 
     /// Dynamic or kinematic: a body whose shapes can meet a static shape.
     fn is_dynamic(&self, body: Option<BodyHandle>) -> bool {
-        body.is_some_and(|b| self.dynamic[b.0 as usize] || self.bodies.is_kinematic(b.0 as usize))
+        body.is_some_and(|b| {
+            let i = b.0 as usize;
+            self.dynamic[i] || self.bodies.is_kinematic(i) || self.bodies.link(i).is_some()
+        })
     }
 
     /// Whether shapes `a` and `b` form a contact pair (see the module doc).

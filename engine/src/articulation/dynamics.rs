@@ -203,10 +203,9 @@ pub fn inverse_dynamics(
     }
 }
 
-/// In-place Cholesky factorisation and solve of the SPD system `a x = b` (n x n row-major; `b` becomes
-/// x). Returns false, leaving `b` unchanged in meaning, if `a` is not positive definite.
-pub fn cholesky_solve(n: usize, a: &mut [f32], b: &mut [f32]) -> bool {
-    // a = L L^T, L stored in the lower triangle.
+/// In-place Cholesky factorisation a = L L^T of the SPD matrix `a` (n x n row-major; L is left in the lower
+/// triangle). Returns false if `a` is not positive definite.
+pub fn cholesky_factor(n: usize, a: &mut [f32]) -> bool {
     for j in 0..n {
         let mut s = a[j * n + j];
         for k in 0..j {
@@ -225,20 +224,34 @@ pub fn cholesky_solve(n: usize, a: &mut [f32], b: &mut [f32]) -> bool {
             a[i * n + j] = s / d;
         }
     }
+    true
+}
+
+/// Solves L L^T x = b in place with the factor of [`cholesky_factor`].
+pub fn cholesky_substitute(n: usize, l: &[f32], b: &mut [f32]) {
     for i in 0..n {
         let mut s = b[i];
         for k in 0..i {
-            s -= a[i * n + k] * b[k];
+            s -= l[i * n + k] * b[k];
         }
-        b[i] = s / a[i * n + i];
+        b[i] = s / l[i * n + i];
     }
     for i in (0..n).rev() {
         let mut s = b[i];
         for k in i + 1..n {
-            s -= a[k * n + i] * b[k];
+            s -= l[k * n + i] * b[k];
         }
-        b[i] = s / a[i * n + i];
+        b[i] = s / l[i * n + i];
     }
+}
+
+/// Factorises and solves the SPD system `a x = b` in place (`b` becomes x). Returns false if `a` is not
+/// positive definite.
+pub fn cholesky_solve(n: usize, a: &mut [f32], b: &mut [f32]) -> bool {
+    if !cholesky_factor(n, a) {
+        return false;
+    }
+    cholesky_substitute(n, a, b);
     true
 }
 
@@ -304,16 +317,73 @@ pub fn world_dynamics_batch(
         .collect()
 }
 
-/// Advances one world's joints by `dt` in `substeps` semi-implicit Euler steps under the torques
-/// `tau` and drive targets `target_q` (each shape [dof_count] or empty): per substep, with M, c + g at
-/// the substep's start,
+/// The first half of a substep of length `h` for one world (link poses `poses` at the substep's start):
+/// with M, c + g at those poses,
 ///
 ///   (M + h (D + Kd)) qdd = clamp(tau + Kp (q_t - q) - Kd qd, effort) - c - g - D qd,
 ///
-/// then qd += h qdd (clamped to the velocity limits), q += h qd, and a joint that passes a position limit
-/// is put back on it with its velocity into the limit removed. Damping (D: joint damping, Kd: drive
-/// damping) is implicit, so a stiff damper cannot destabilise the step; the drive's effort counts
-/// against the effort limit, the passive damping does not.
+/// `qd` becomes qd + h qdd, the velocity before any contact. `factor` receives the Cholesky factor of
+/// M + h (D + Kd) (the joint-space inertia contact impulses act through this substep). Damping (D: joint
+/// damping, Kd: drive damping) is implicit, so a stiff damper cannot destabilise the step; the drive's
+/// effort counts against the effort limit, the passive damping does not. Returns false (and leaves `qd`)
+/// for a chain without mass.
+#[allow(clippy::too_many_arguments)]
+pub fn free_velocity(
+    model: &ArticulationModel,
+    poses: &[Pose],
+    q: &[f32],
+    qd: &mut [f32],
+    tau: &[f32],
+    target_q: &[f32],
+    h: f32,
+    factor: &mut [f32],
+) -> bool {
+    let n = model.dof_count();
+    let mut bias = vec![0.0f32; n];
+    mass_matrix(model, poses, factor);
+    inverse_dynamics(model, poses, qd, &[], true, &mut bias);
+    let mut rhs = vec![0.0f32; n];
+    for d in 0..n {
+        let kd = model.dof_drive_damping[d];
+        let mut actuator = tau.get(d).copied().unwrap_or(0.0);
+        let driven = !target_q.is_empty();
+        if driven {
+            actuator += model.dof_drive_stiffness[d] * (target_q[d] - q[d]) - kd * qd[d];
+        }
+        let limit = model.dof_effort_limit[d];
+        rhs[d] = actuator.clamp(-limit, limit) - bias[d] - model.dof_damping[d] * qd[d];
+        factor[d * n + d] += h * (model.dof_damping[d] + if driven { kd } else { 0.0 });
+    }
+    if !cholesky_factor(n, factor) {
+        return false;
+    }
+    cholesky_substitute(n, factor, &mut rhs);
+    for d in 0..n {
+        qd[d] += h * rhs[d];
+    }
+    true
+}
+
+/// The second half of a substep: clamps `qd` to the velocity limits, moves q by h qd, and puts a joint
+/// that passed a position limit back on it with its velocity into the limit removed.
+pub fn integrate_positions(model: &ArticulationModel, q: &mut [f32], qd: &mut [f32], h: f32) {
+    for d in 0..model.dof_count() {
+        let vmax = model.dof_velocity_limit[d];
+        qd[d] = qd[d].clamp(-vmax, vmax);
+        q[d] += h * qd[d];
+        if q[d] < model.dof_lower[d] {
+            q[d] = model.dof_lower[d];
+            qd[d] = qd[d].max(0.0);
+        } else if q[d] > model.dof_upper[d] {
+            q[d] = model.dof_upper[d];
+            qd[d] = qd[d].min(0.0);
+        }
+    }
+}
+
+/// Advances one world's joints by `dt` in `substeps` semi-implicit Euler steps under the torques `tau`
+/// and drive targets `target_q` (each shape [dof_count] or empty), without contacts: per substep
+/// [`free_velocity`] then [`integrate_positions`].
 pub fn step_world(
     model: &ArticulationModel,
     q: &mut [f32],
@@ -326,39 +396,93 @@ pub fn step_world(
     let n = model.dof_count();
     let h = dt / substeps.max(1) as f32;
     let mut poses = vec![(Vec3::ZERO, Quat::IDENTITY); model.link_count()];
-    let mut mm = vec![0.0f32; n * n];
-    let mut bias = vec![0.0f32; n];
-    let mut rhs = vec![0.0f32; n];
+    let mut factor = vec![0.0f32; n * n];
     for _ in 0..substeps.max(1) {
         forward_kinematics(model, q, &mut poses);
-        mass_matrix(model, &poses, &mut mm);
-        inverse_dynamics(model, &poses, qd, &[], true, &mut bias);
-        for d in 0..n {
-            let kd = model.dof_drive_damping[d];
-            let mut actuator = tau.get(d).copied().unwrap_or(0.0);
-            if let Some(&t) = target_q.get(d) {
-                actuator += model.dof_drive_stiffness[d] * (t - q[d]) - kd * qd[d];
+        if free_velocity(model, &poses, q, qd, tau, target_q, h, &mut factor) {
+            integrate_positions(model, q, qd, h);
+        }
+    }
+}
+
+/// How the links that touch things respond to contact impulses during one substep: the contact solver
+/// sees each such link as a body whose twist (velocity of its centre of mass, angular velocity) is
+/// J_s qd, and an impulse Phi_t (force, torque about the centre of mass of link t) changes it by
+/// K_st Phi_t with K_st = J_s A^-1 J_t^T, A = M + h (D + Kd) the substep's joint-space inertia (the
+/// operational-space inverse inertia of the links, Khatib 1987). The joints then move with
+/// qd = qd_free + sum_t A^-1 J_t^T Phi_t.
+#[derive(Clone, Debug)]
+pub struct ContactResponse {
+    /// The links, in slot order.
+    pub links: Vec<u32>,
+    /// Per slot, the twist Jacobian at the link's centre of mass, 6 x dof row-major.
+    pub jacobian: Vec<Vec<f32>>,
+    /// Per slot, A^-1 J^T, dof x 6 row-major.
+    pub inv_inertia_jt: Vec<Vec<f32>>,
+    /// K_st for slots s, t at index s * slots + t, 6 x 6 row-major.
+    pub k: Vec<[f32; 36]>,
+}
+
+impl ContactResponse {
+    /// The response of `links` at link poses `poses`, with `factor` the Cholesky factor of A.
+    pub fn new(model: &ArticulationModel, poses: &[Pose], factor: &[f32], links: &[u32]) -> Self {
+        let n = model.dof_count();
+        let mut jacobian = Vec::with_capacity(links.len());
+        let mut inv_inertia_jt = Vec::with_capacity(links.len());
+        for &l in links {
+            let (p, r) = poses[l as usize];
+            let mut j = vec![0.0f32; 6 * n];
+            point_jacobian(model, poses, l, p + r * model.link_com[l as usize], &mut j);
+            let mut y = vec![0.0f32; n * 6];
+            let mut col = vec![0.0f32; n];
+            for k in 0..6 {
+                col.copy_from_slice(&j[k * n..(k + 1) * n]);
+                cholesky_substitute(n, factor, &mut col);
+                for d in 0..n {
+                    y[d * 6 + k] = col[d];
+                }
             }
-            let limit = model.dof_effort_limit[d];
-            actuator = actuator.clamp(-limit, limit);
-            rhs[d] = actuator - bias[d] - model.dof_damping[d] * qd[d];
-            let implicit = if target_q.is_empty() { 0.0 } else { kd };
-            mm[d * n + d] += h * (model.dof_damping[d] + implicit);
+            jacobian.push(j);
+            inv_inertia_jt.push(y);
         }
-        if !cholesky_solve(n, &mut mm, &mut rhs) {
-            // A massless chain has no dynamics to integrate; leave it where it is.
-            continue;
+        let slots = links.len();
+        let mut k = vec![[0.0f32; 36]; slots * slots];
+        for s in 0..slots {
+            for t in 0..slots {
+                let kst = &mut k[s * slots + t];
+                for i in 0..6 {
+                    for c in 0..6 {
+                        kst[i * 6 + c] = (0..n).map(|d| jacobian[s][i * n + d] * inv_inertia_jt[t][d * 6 + c]).sum();
+                    }
+                }
+            }
         }
-        for d in 0..n {
-            let vmax = model.dof_velocity_limit[d];
-            qd[d] = (qd[d] + h * rhs[d]).clamp(-vmax, vmax);
-            q[d] += h * qd[d];
-            if q[d] < model.dof_lower[d] {
-                q[d] = model.dof_lower[d];
-                qd[d] = qd[d].max(0.0);
-            } else if q[d] > model.dof_upper[d] {
-                q[d] = model.dof_upper[d];
-                qd[d] = qd[d].min(0.0);
+        ContactResponse { links: links.to_vec(), jacobian, inv_inertia_jt, k }
+    }
+
+    /// Twist of slot `s` (velocity of the centre of mass [m/s], angular velocity [rad/s]) at joint
+    /// velocities `qd`.
+    pub fn twist(&self, s: usize, qd: &[f32]) -> [Vec3; 2] {
+        let n = qd.len();
+        let row = |k: usize| (0..n).map(|d| self.jacobian[s][k * n + d] * qd[d]).sum::<f32>();
+        [Vec3::new(row(0), row(1), row(2)), Vec3::new(row(3), row(4), row(5))]
+    }
+
+    /// K_st phi: the twist change of slot `s` for the spatial impulse `phi` (force [N s], torque about
+    /// the centre of mass [N m s]) on slot `t`.
+    pub fn response(&self, s: usize, t: usize, phi: [Vec3; 2]) -> [Vec3; 2] {
+        let k = &self.k[s * self.links.len() + t];
+        let x = [phi[0].x, phi[0].y, phi[0].z, phi[1].x, phi[1].y, phi[1].z];
+        let row = |i: usize| (0..6).map(|c| k[i * 6 + c] * x[c]).sum::<f32>();
+        [Vec3::new(row(0), row(1), row(2)), Vec3::new(row(3), row(4), row(5))]
+    }
+
+    /// Adds sum_t A^-1 J_t^T phi_t to `qd` (the joint velocity change from the slots' impulses).
+    pub fn apply_impulses(&self, phi: &[[Vec3; 2]], qd: &mut [f32]) {
+        for (t, p) in phi.iter().enumerate() {
+            let x = [p[0].x, p[0].y, p[0].z, p[1].x, p[1].y, p[1].z];
+            for (d, v) in qd.iter_mut().enumerate() {
+                *v += (0..6).map(|c| self.inv_inertia_jt[t][d * 6 + c] * x[c]).sum::<f32>();
             }
         }
     }

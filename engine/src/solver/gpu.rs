@@ -219,6 +219,15 @@ impl GpuSolver {
     pub fn new(gpu: &GpuContext, contacts: &ContactPipeline, model: &BodyModel, cfg: &SolverConfig) -> Result<Self> {
         cfg.validate()?;
         model.validate()?;
+        if let Some(i) = (0..model.body_count()).find(|&i| model.link(i).is_some()) {
+            return Err(EngineError::Config {
+                field: "body_link",
+                value: format!("body {i} is an articulation link"),
+                expected: "no articulated bodies: the GPU solver does not step articulations yet; use \
+                           solver::step_cpu_articulated"
+                    .into(),
+            });
+        }
         if model.body_count() as u32 != contacts.body_count {
             return Err(EngineError::Config {
                 field: "body_count",

@@ -43,6 +43,7 @@
 
 pub mod gpu;
 
+use crate::articulation::{dynamics, ArticulationControl, ArticulationModel, ArticulationState};
 use crate::contact::generate::{sdf_sample_cpu, Xf};
 use crate::contact::model::{FlatModel, NO_BODY};
 use crate::contact::{ContactsHost, TransformGpu};
@@ -60,6 +61,10 @@ pub struct BodyModel {
     /// Kinematic bodies move with the velocity in the state (no gravity, no contact impulses), shape
     /// [body_count] or shorter (missing entries: not kinematic).
     pub body_kinematic: Vec<bool>,
+    /// The articulation link a body is ([`crate::articulation`]; its pose and velocity follow the joints,
+    /// and contact impulses on it act through the articulation's joint-space inertia), shape [body_count]
+    /// or shorter (missing entries and [`crate::articulation::NO_LINK`]: not a link).
+    pub body_link: Vec<u32>,
     /// Gravity [m/s^2].
     pub gravity: Vec3,
 }
@@ -88,6 +93,22 @@ impl BodyModel {
         self.body_kinematic.resize(i as usize + 1, false);
         self.body_kinematic[i as usize] = true;
         i
+    }
+
+    /// Adds a body that is link `link` of the world's articulation, with its centre of mass `com` [m] in
+    /// the link frame (the point its velocity is given at). Only [`step_cpu_articulated`] steps such
+    /// bodies; the GPU solver refuses them.
+    pub fn add_articulated(&mut self, link: u32, com: Vec3) -> u32 {
+        let i = self.add_static();
+        self.body_com[i as usize] = com;
+        self.body_link.resize(i as usize + 1, crate::articulation::NO_LINK);
+        self.body_link[i as usize] = link;
+        i
+    }
+
+    /// The articulation link body `i` is, if it is one.
+    pub fn link(&self, i: usize) -> Option<u32> {
+        self.body_link.get(i).copied().filter(|&l| l != crate::articulation::NO_LINK)
     }
 
     /// Adds a static body (never moves).
@@ -228,6 +249,29 @@ pub struct WarmStart {
 }
 
 impl WarmStart {
+    /// The total normal impulse [N s] the last substep of the last frame applied through the rows of pair
+    /// `pair` in world `world` (divide by the substep length for the mean contact force [N]); 0 for a
+    /// pair without rows.
+    pub fn pair_normal_impulse(&self, world: usize, pair: usize) -> f32 {
+        self.rows.get(world).map_or(0.0, |rows| rows.iter().filter(|r| r.pair == pair).map(|r| r.lambda_n).sum())
+    }
+
+    /// The total contact impulse vector [N s] (normal and friction) the last substep of the last frame
+    /// applied to pair `pair`'s query body `a` in world `world` (world frame; the SDF body got the opposite).
+    pub fn pair_impulse(&self, world: usize, pair: usize) -> Vec3 {
+        self.rows.get(world).map_or(Vec3::ZERO, |rows| {
+            rows.iter()
+                .filter(|r| r.pair == pair)
+                .filter_map(|r| {
+                    r.normal.map(|n| {
+                        let t1 = n.any_orthonormal_vector();
+                        r.lambda_n * n + r.lambda_t[0] * t1 + r.lambda_t[1] * n.cross(t1)
+                    })
+                })
+                .sum()
+        })
+    }
+
     /// Renumbers the pairs of last frame's rows (`map`: old pair index -> new, None: the pair is gone and
     /// its rows are dropped), for callers whose pair list changes from frame to frame (crate::crowd).
     pub fn remap_pairs(&mut self, map: impl Fn(usize) -> Option<usize>) {
@@ -263,7 +307,46 @@ pub fn step_cpu(
     control: &Control,
     warm: &mut WarmStart,
 ) -> Vec<bool> {
+    step_cpu_articulated(model, state, contacts, flat, cfg, control, warm, None)
+}
+
+/// A world's articulation for [`step_cpu_articulated`]: the model every world shares, every world's joint
+/// state (advanced by the step) and the joint torques and drive targets held over the frame.
+pub struct ArticulationStep<'a> {
+    pub model: &'a ArticulationModel,
+    pub state: &'a mut ArticulationState,
+    pub control: &'a ArticulationControl,
+}
+
+/// [`step_cpu`] with an articulation in every world whose links are bodies of `model`
+/// ([`BodyModel::add_articulated`]): the joints and the bodies are solved together (mixed coordinates).
+/// Per substep the articulation's velocity before contact comes from the joint torques
+/// ([`dynamics::free_velocity`]); the contact rows see each link body through its twist and the
+/// joint-space inertia ([`dynamics::ContactResponse`]), so a finger squeezing a nut feels the arm's inertia
+/// and its drives, not an infinite mass; the joints then move with the impulses the rows applied, and the
+/// link bodies' poses follow by forward kinematics. External wrenches on link bodies are ignored (push on
+/// the joints instead). Returns per world whether it stayed finite and within `max_speed` (joint
+/// velocities included).
+#[allow(clippy::too_many_arguments)]
+pub fn step_cpu_articulated(
+    model: &BodyModel,
+    state: &mut BodyState,
+    contacts: &ContactsHost,
+    flat: &FlatModel,
+    cfg: &SolverConfig,
+    control: &Control,
+    warm: &mut WarmStart,
+    mut art: Option<ArticulationStep>,
+) -> Vec<bool> {
     let nb = model.body_count();
+    // Link bodies in slot order, and each body's slot.
+    let link_bodies: Vec<usize> = (0..nb).filter(|&i| model.link(i).is_some()).collect();
+    let links: Vec<u32> = link_bodies.iter().map(|&i| model.link(i).unwrap()).collect();
+    let mut slot = vec![None; nb + 1];
+    for (s, &i) in link_bodies.iter().enumerate() {
+        slot[i] = Some(s);
+    }
+    assert!(link_bodies.is_empty() || art.is_some(), "a model with articulated bodies needs its articulation");
     let world_count = state.body_q.len() / nb.max(1);
     let pair_count = flat.pairs.len();
     let h = cfg.dt / cfg.substeps as f32;
@@ -274,9 +357,25 @@ pub fn step_cpu(
         // Index nb stands for the static world (infinite mass, identity pose).
         let mut pos: Vec<(Vec3, Quat)> = (0..nb).map(|i| xf(&state.body_q[base + i])).collect();
         pos.push((Vec3::ZERO, Quat::IDENTITY));
-        let mut vel: Vec<[Vec3; 2]> = state.body_qd[base..base + nb].to_vec();
-        vel.push([Vec3::ZERO; 2]);
-        let ctx = Step { flat, model, cfg, h };
+        let mut vel = Vels { v: state.body_qd[base..base + nb].to_vec(), phi: vec![[Vec3::ZERO; 2]; links.len()] };
+        vel.v.push([Vec3::ZERO; 2]);
+        // This world's joints, and the link poses they give (used for the frame's rows: the caller keeps
+        // the link bodies' poses in the state at the joints' forward kinematics).
+        let mut joints = art.as_mut().map(|a| {
+            let n = a.model.dof_count();
+            let w_slice = |v: &[f32]| v.get(w * n..(w + 1) * n).map(<[f32]>::to_vec).unwrap_or_default();
+            let q = a.state.joint_q[w * n..(w + 1) * n].to_vec();
+            let qd = a.state.joint_qd[w * n..(w + 1) * n].to_vec();
+            (q, qd, w_slice(&a.control.joint_tau), w_slice(&a.control.joint_target_q))
+        });
+        let mut link_pose = art.as_ref().map(|a| vec![(Vec3::ZERO, Quat::IDENTITY); a.model.link_count()]);
+        if let (Some(a), Some((q, _, _, _)), Some(lp)) = (art.as_ref(), joints.as_ref(), link_pose.as_mut()) {
+            dynamics::forward_kinematics(a.model, q, lp);
+            for (s, &i) in link_bodies.iter().enumerate() {
+                pos[i] = lp[links[s] as usize];
+            }
+        }
+        let mut ctx = Step { flat, model, cfg, h, links: None, slot: &slot, link_bodies: &link_bodies };
         let body = |b: u32| if b == NO_BODY { nb } else { b as usize };
         // Rows from the reduced contacts, anchored in the bodies' frames at generation time.
         let mut rows = Vec::new();
@@ -324,7 +423,22 @@ pub fn step_cpu(
             }
         }
         for _ in 0..cfg.substeps {
-            for (i, v) in vel.iter_mut().enumerate().take(nb) {
+            // The articulation's velocity before contact, and how its links answer impulses this substep.
+            if let (Some(a), Some((q, qd, tau, target)), Some(lp)) = (art.as_ref(), joints.as_mut(), link_pose.as_mut())
+            {
+                let n = a.model.dof_count();
+                let mut factor = vec![0.0f32; n * n];
+                dynamics::forward_kinematics(a.model, q, lp);
+                if dynamics::free_velocity(a.model, lp, q, qd, tau, target, h, &mut factor) {
+                    let resp = dynamics::ContactResponse::new(a.model, lp, &factor, &links);
+                    for (s, &i) in link_bodies.iter().enumerate() {
+                        vel.v[i] = resp.twist(s, qd);
+                    }
+                    ctx.links = Some(resp);
+                }
+                vel.phi.iter_mut().for_each(|p| *p = [Vec3::ZERO; 2]);
+            }
+            for (i, v) in vel.v.iter_mut().enumerate().take(nb) {
                 if ctx.inv_m(i) > 0.0 {
                     let [f, tau] = control.wrench(base + i);
                     v[0] += (model.gravity + ctx.inv_m(i) * f) * h;
@@ -350,27 +464,56 @@ pub fn step_cpu(
                 solve_rows(&ctx, &mut rows, &pos, &mut vel, true, it == 0);
             }
             for i in 0..nb {
-                if ctx.inv_m(i) > 0.0 || model.is_kinematic(i) {
+                if (ctx.inv_m(i) > 0.0 || model.is_kinematic(i)) && slot[i].is_none() {
                     let (p, q) = pos[i];
                     let c = p + q * ctx.com(i);
-                    let c2 = c + vel[i][0] * h;
-                    let w = vel[i][1];
+                    let c2 = c + vel.v[i][0] * h;
+                    let w = vel.v[i][1];
                     let dq = Quat::from_xyzw(w.x, w.y, w.z, 0.0) * q * (0.5 * h);
                     let q2 = Quat::from_vec4(Vec4::from(q) + Vec4::from(dq)).normalize();
                     pos[i] = (c2 - q2 * ctx.com(i), q2);
                 }
             }
+            // The joints move with the impulses the position sweeps applied; the links follow.
+            if let (Some(a), Some((q, qd, _, _)), Some(lp), Some(resp)) =
+                (art.as_ref(), joints.as_mut(), link_pose.as_mut(), ctx.links.as_ref())
+            {
+                resp.apply_impulses(&vel.phi, qd);
+                dynamics::integrate_positions(a.model, q, qd, h);
+                dynamics::forward_kinematics(a.model, q, lp);
+                vel.phi.iter_mut().for_each(|p| *p = [Vec3::ZERO; 2]);
+                for (s, &i) in link_bodies.iter().enumerate() {
+                    pos[i] = lp[links[s] as usize];
+                    // The substep's Jacobians serve the velocity sweeps too (the poses moved by h qd).
+                    vel.v[i] = resp.twist(s, qd);
+                }
+            }
             for it in 0..cfg.vel_iters {
                 solve_rows(&ctx, &mut rows, &pos, &mut vel, false, it == 0);
+            }
+            if let (Some((_, qd, _, _)), Some(resp)) = (joints.as_mut(), ctx.links.as_ref()) {
+                resp.apply_impulses(&vel.phi, qd);
+                vel.phi.iter_mut().for_each(|p| *p = [Vec3::ZERO; 2]);
+                for (s, &i) in link_bodies.iter().enumerate() {
+                    vel.v[i] = resp.twist(s, qd);
+                }
             }
         }
         warm.rows[w] = rows;
         for i in 0..nb {
             let (p, q) = pos[i];
             state.body_q[base + i] = TransformGpu::new(p, q);
-            state.body_qd[base + i] = vel[i];
-            let finite = p.is_finite() && q.is_finite() && vel[i][0].is_finite() && vel[i][1].is_finite();
-            if !finite || vel[i][0].length() > cfg.max_speed {
+            state.body_qd[base + i] = vel.v[i];
+            let finite = p.is_finite() && q.is_finite() && vel.v[i][0].is_finite() && vel.v[i][1].is_finite();
+            if !finite || vel.v[i][0].length() > cfg.max_speed {
+                ok[w] = false;
+            }
+        }
+        if let (Some(a), Some((q, qd, _, _))) = (art.as_mut(), joints.as_ref()) {
+            let n = a.model.dof_count();
+            a.state.joint_q[w * n..(w + 1) * n].copy_from_slice(q);
+            a.state.joint_qd[w * n..(w + 1) * n].copy_from_slice(qd);
+            if !q.iter().chain(qd.iter()).all(|x| x.is_finite()) || qd.iter().any(|v| v.abs() > cfg.max_speed) {
                 ok[w] = false;
             }
         }
@@ -402,6 +545,20 @@ struct Step<'a> {
     cfg: &'a SolverConfig,
     /// Substep length [s].
     h: f32,
+    /// This substep's articulation response (None: no articulated bodies, or a massless chain).
+    links: Option<dynamics::ContactResponse>,
+    /// Each body's articulation slot (index body_count, the static world, has none), shape [body_count + 1].
+    slot: &'a [Option<usize>],
+    /// The body of each slot.
+    link_bodies: &'a [usize],
+}
+
+/// The bodies' velocities during a step (twist of the centre of mass: linear [m/s], angular [rad/s];
+/// index body_count is the static world), and the spatial impulses (force [N s], torque about the centre
+/// of mass [N m s]) applied to each articulation slot since its joints last took them.
+struct Vels {
+    v: Vec<[Vec3; 2]>,
+    phi: Vec<[Vec3; 2]>,
 }
 
 impl Step<'_> {
@@ -436,12 +593,49 @@ impl Step<'_> {
         }
     }
 
+    /// The spatial impulses (force, torque about the centre of mass) a unit `d` at the row's point puts on
+    /// its bodies that are articulation links: (slot, impulse) for a, then b (which takes the opposite).
+    fn link_impulses(&self, r: &Row, l: &Lever, d: Vec3) -> [Option<(usize, [Vec3; 2])>; 2] {
+        [self.slot[r.a].map(|s| (s, [d, l.ra.cross(d)])), self.slot[r.b].map(|s| (s, [-d, -l.rb.cross(d)]))]
+    }
+
+    /// Inverse effective mass of the row along unit `d` [1/kg]: rigid bodies through their mass and
+    /// inertia, articulation links through the substep's K blocks (cross terms included when both sides are
+    /// links of the articulation).
+    fn eff(&self, r: &Row, l: &Lever, d: Vec3) -> f32 {
+        let (ca, cb) = (l.ra.cross(d), l.rb.cross(d));
+        // Zero for link bodies: their inverse mass and inertia are zero in the body model.
+        let mut k = self.inv_m(r.a) + self.inv_m(r.b) + ca.dot(l.ia * ca) + cb.dot(l.ib * cb);
+        if let Some(resp) = &self.links {
+            let sides = self.link_impulses(r, l, d);
+            for (s, us) in sides.iter().flatten() {
+                for (t, ut) in sides.iter().flatten() {
+                    let dv = resp.response(*s, *t, *ut);
+                    k += us[0].dot(dv[0]) + us[1].dot(dv[1]);
+                }
+            }
+        }
+        k
+    }
+
     /// Applies impulse `imp` [N s] to a and its opposite to b.
-    fn apply(&self, r: &Row, l: &Lever, vel: &mut [[Vec3; 2]], imp: Vec3) {
-        vel[r.a][0] += self.inv_m(r.a) * imp;
-        vel[r.a][1] += l.ia * l.ra.cross(imp);
-        vel[r.b][0] -= self.inv_m(r.b) * imp;
-        vel[r.b][1] -= l.ib * l.rb.cross(imp);
+    fn apply(&self, r: &Row, l: &Lever, vel: &mut Vels, imp: Vec3) {
+        vel.v[r.a][0] += self.inv_m(r.a) * imp;
+        vel.v[r.a][1] += l.ia * l.ra.cross(imp);
+        vel.v[r.b][0] -= self.inv_m(r.b) * imp;
+        vel.v[r.b][1] -= l.ib * l.rb.cross(imp);
+        if let Some(resp) = &self.links {
+            for (t, phi) in self.link_impulses(r, l, imp).into_iter().flatten() {
+                vel.phi[t][0] += phi[0];
+                vel.phi[t][1] += phi[1];
+                // An impulse on one link moves every link of the articulation.
+                for (s, &body) in self.link_bodies.iter().enumerate() {
+                    let dv = resp.response(s, t, phi);
+                    vel.v[body][0] += dv[0];
+                    vel.v[body][1] += dv[1];
+                }
+            }
+        }
     }
 }
 
@@ -456,7 +650,7 @@ struct Lever {
 
 /// One sweep over the rows, in (pair, patch, slot) order: each patch's rows are solved once with
 /// `resample`, then `patch_iters - 1` more times on the sampled geometry (solver.wgsl's `sweep`).
-fn solve_rows(ctx: &Step, rows: &mut [Row], pos: &[(Vec3, Quat)], vel: &mut [[Vec3; 2]], bias: bool, resample: bool) {
+fn solve_rows(ctx: &Step, rows: &mut [Row], pos: &[(Vec3, Quat)], vel: &mut Vels, bias: bool, resample: bool) {
     for patch in rows.chunk_by_mut(|x, y| (x.pair, x.patch) == (y.pair, y.patch)) {
         for pass in 0..ctx.cfg.patch_iters {
             for i in 0..patch.len() {
@@ -472,7 +666,7 @@ fn solve_row(
     patch: &mut [Row],
     i: usize,
     pos: &[(Vec3, Quat)],
-    vel: &mut [[Vec3; 2]],
+    vel: &mut Vels,
     bias: bool,
     resample: bool,
 ) {
@@ -506,14 +700,10 @@ fn solve_row(
         }
     };
     let l = ctx.lever(r, pos, n);
-    let (Lever { ra, rb, ia, ib }, ma, mb) = (&l, ctx.inv_m(r.a), ctx.inv_m(r.b));
+    let (ra, rb) = (l.ra, l.rb);
     let (a, b) = (r.a, r.b);
-    let rel = |vel: &[[Vec3; 2]]| (vel[a][0] + vel[a][1].cross(*ra)) - (vel[b][0] + vel[b][1].cross(*rb));
-    let eff = |d: Vec3| {
-        let (ca, cb) = (ra.cross(d), rb.cross(d));
-        ma + mb + ca.dot(*ia * ca) + cb.dot(*ib * cb)
-    };
-    let k = eff(n);
+    let rel = |vel: &Vels| (vel.v[a][0] + vel.v[a][1].cross(ra)) - (vel.v[b][0] + vel.v[b][1].cross(rb));
+    let k = ctx.eff(r, &l, n);
     if k <= 0.0 {
         return;
     }
@@ -537,7 +727,7 @@ fn solve_row(
         let limit = if pooled { mu * share(patch) } else { mu * patch[i].lambda_n };
         let r = &mut patch[i];
         for (j, t) in [t1, t2].into_iter().enumerate() {
-            let kt = eff(t);
+            let kt = ctx.eff(r, &l, t);
             if kt <= 0.0 {
                 continue;
             }

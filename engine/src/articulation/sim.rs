@@ -1,0 +1,133 @@
+//! Worlds with an articulation and free bodies, stepped frame by frame: contacts generated and reduced
+//! on the GPU (or lavapipe) at each frame's start, then the mixed-coordinate Gauss-Seidel step of
+//! [`crate::solver::step_cpu_articulated`] on the host. The link bodies' poses in the state always
+//! follow the joints (forward kinematics), so the contact pipeline sees the fingers where the joints put
+//! them.
+
+use super::dynamics::forward_kinematics;
+use super::{ArticulationControl, ArticulationModel, ArticulationState};
+use crate::builder::Model;
+use crate::contact::{ContactConfig, ContactPipeline, ContactsHost, TransformGpu};
+use crate::error::{EngineError, Result};
+use crate::gpu::GpuContext;
+use crate::solver::{step_cpu_articulated, ArticulationStep, BodyState, Control, SolverConfig, WarmStart};
+use glam::{Quat, Vec3};
+
+/// Every world's bodies and joints, and what steps them.
+pub struct ArticulatedSim {
+    pub model: Model,
+    pub articulation: ArticulationModel,
+    pub solver: SolverConfig,
+    pub pipe: ContactPipeline,
+    /// Body poses and velocities, shape [world_count * body_count]; link bodies follow the joints.
+    pub state: BodyState,
+    /// Joint positions and velocities, shape [world_count * dof_count].
+    pub joints: ArticulationState,
+    pub warm: WarmStart,
+    /// The contacts of the last frame (generated at its start).
+    pub contacts: Option<ContactsHost>,
+}
+
+impl ArticulatedSim {
+    /// Builds the contact pipeline for `model` (whose link bodies name links of `articulation`) and sets
+    /// the link bodies' poses from `joints`.
+    pub fn new(
+        gpu: &GpuContext,
+        model: Model,
+        articulation: ArticulationModel,
+        solver: SolverConfig,
+        contact: &ContactConfig,
+        state: BodyState,
+        joints: ArticulationState,
+    ) -> Result<Self> {
+        solver.validate()?;
+        let nb = model.bodies.body_count();
+        let worlds = model.world_count as usize;
+        if state.body_q.len() != worlds * nb || state.body_qd.len() != worlds * nb {
+            return Err(EngineError::Config {
+                field: "state",
+                value: format!("{} poses, {} velocities", state.body_q.len(), state.body_qd.len()),
+                expected: format!("{worlds} worlds x {nb} bodies = {}", worlds * nb),
+            });
+        }
+        let dof = articulation.dof_count();
+        if joints.joint_q.len() != worlds * dof || joints.joint_qd.len() != worlds * dof {
+            return Err(EngineError::Config {
+                field: "joints",
+                value: format!("{} positions, {} velocities", joints.joint_q.len(), joints.joint_qd.len()),
+                expected: format!("{worlds} worlds x {dof} joints = {}", worlds * dof),
+            });
+        }
+        for i in 0..nb {
+            if let Some(l) = model.bodies.link(i) {
+                if l as usize >= articulation.link_count() {
+                    return Err(EngineError::Config {
+                        field: "body_link",
+                        value: format!("body {i} is link {l}"),
+                        expected: format!("a link of '{}' (0..{})", articulation.name, articulation.link_count()),
+                    });
+                }
+            }
+        }
+        let pipe = ContactPipeline::new(gpu, &model.contacts, model.world_count, contact)?;
+        let mut sim = ArticulatedSim {
+            model,
+            articulation,
+            solver,
+            pipe,
+            state,
+            joints,
+            warm: WarmStart::default(),
+            contacts: None,
+        };
+        sim.sync_links();
+        Ok(sim)
+    }
+
+    pub fn world_count(&self) -> usize {
+        self.model.world_count as usize
+    }
+
+    /// Puts every link body where the joints put its link (after the joints were set from outside).
+    pub fn sync_links(&mut self) {
+        let nb = self.model.bodies.body_count();
+        let dof = self.articulation.dof_count();
+        let mut poses = vec![(Vec3::ZERO, Quat::IDENTITY); self.articulation.link_count()];
+        for w in 0..self.world_count() {
+            forward_kinematics(&self.articulation, &self.joints.joint_q[w * dof..(w + 1) * dof], &mut poses);
+            for i in 0..nb {
+                if let Some(l) = self.model.bodies.link(i) {
+                    let (p, q) = poses[l as usize];
+                    self.state.body_q[w * nb + i] = TransformGpu::new(p, q);
+                }
+            }
+        }
+    }
+
+    /// One frame: contacts at the current poses, then the coupled step under the body wrenches `control`
+    /// and the joint torques and drive targets `joint_control`. Returns per world whether it diverged
+    /// (non-finite or over the solver's speed bound): such a world is left for the caller to reset.
+    pub fn step(&mut self, gpu: &GpuContext, control: &Control, joint_control: &ArticulationControl) -> Vec<bool> {
+        self.pipe.write_body_q(gpu, &self.state.body_q);
+        self.pipe.run(gpu);
+        let contacts = self.pipe.read(gpu);
+        let ok = step_cpu_articulated(
+            &self.model.bodies,
+            &mut self.state,
+            &contacts,
+            &self.pipe.flat,
+            &self.solver,
+            control,
+            &mut self.warm,
+            Some(ArticulationStep { model: &self.articulation, state: &mut self.joints, control: joint_control }),
+        );
+        self.contacts = Some(contacts);
+        ok.into_iter().map(|ok| !ok).collect()
+    }
+
+    /// The mean contact force [N] on pair `pair`'s query shape in world `world` over the last substep
+    /// (world frame; the SDF shape's body felt the opposite).
+    pub fn pair_force(&self, world: usize, pair: usize) -> Vec3 {
+        self.warm.pair_impulse(world, pair) * (self.solver.substeps as f32 / self.solver.dt)
+    }
+}
