@@ -48,6 +48,7 @@ use crate::contact::generate::{sdf_sample_cpu, Xf};
 use crate::contact::model::{FlatModel, NO_BODY};
 use crate::contact::{ContactsHost, TransformGpu};
 use glam::{Mat3, Quat, Vec3, Vec4};
+use rayon::prelude::*;
 
 /// Static description of the bodies of one world (all worlds share it).
 #[derive(Clone, Debug, Default)]
@@ -350,175 +351,204 @@ pub fn step_cpu_articulated(
     let world_count = state.body_q.len() / nb.max(1);
     let pair_count = flat.pairs.len();
     let h = cfg.dt / cfg.substeps as f32;
-    let mut ok = vec![true; world_count];
     warm.rows.resize(world_count, Vec::new());
-    for w in 0..world_count {
-        let base = w * nb;
-        // Index nb stands for the static world (infinite mass, identity pose).
-        let mut pos: Vec<(Vec3, Quat)> = (0..nb).map(|i| xf(&state.body_q[base + i])).collect();
-        pos.push((Vec3::ZERO, Quat::IDENTITY));
-        let mut vel = Vels { v: state.body_qd[base..base + nb].to_vec(), phi: vec![[Vec3::ZERO; 2]; links.len()] };
-        vel.v.push([Vec3::ZERO; 2]);
-        // This world's joints, and the link poses they give (used for the frame's rows: the caller keeps
-        // the link bodies' poses in the state at the joints' forward kinematics).
-        let mut joints = art.as_mut().map(|a| {
-            let n = a.model.dof_count();
-            let w_slice = |v: &[f32]| v.get(w * n..(w + 1) * n).map(<[f32]>::to_vec).unwrap_or_default();
-            let q = a.state.joint_q[w * n..(w + 1) * n].to_vec();
-            let qd = a.state.joint_qd[w * n..(w + 1) * n].to_vec();
-            (q, qd, w_slice(&a.control.joint_tau), w_slice(&a.control.joint_target_q))
-        });
-        let mut link_pose = art.as_ref().map(|a| vec![(Vec3::ZERO, Quat::IDENTITY); a.model.link_count()]);
-        if let (Some(a), Some((q, _, _, _)), Some(lp)) = (art.as_ref(), joints.as_ref(), link_pose.as_mut()) {
-            dynamics::forward_kinematics(a.model, q, lp);
-            for (s, &i) in link_bodies.iter().enumerate() {
-                pos[i] = lp[links[s] as usize];
-            }
-        }
-        let mut ctx = Step { flat, model, cfg, h, links: None, slot: &slot, link_bodies: &link_bodies };
-        let body = |b: u32| if b == NO_BODY { nb } else { b as usize };
-        // Rows from the reduced contacts, anchored in the bodies' frames at generation time.
-        let mut rows = Vec::new();
-        for p in 0..pair_count {
-            let (a, b) = (body(flat.pairs[p].body_a), body(flat.pairs[p].body_b));
-            let tol = WARM_DISTANCE * flat.pairs[p].contact_offset;
-            for (i, patch) in contacts.patches[w * pair_count + p].iter().enumerate() {
-                // Last frame's rows of the same patch (rows are sorted by (pair, patch), then slot).
-                let prev = &warm.rows[w];
-                let old = &prev[prev.partition_point(|o| (o.pair, o.patch) < (p, i))
-                    ..prev.partition_point(|o| (o.pair, o.patch) <= (p, i))];
-                for c in &patch.contacts {
-                    let ((pa, qa), (pb, qb)) = (pos[a], pos[b]);
-                    let mut row = Row {
-                        a,
-                        b,
-                        pair: p,
-                        patch: i,
-                        anchor_a: qa.inverse() * (c.point + flat.pairs[p].radius * patch.normal - pa),
-                        mu: flat.pairs[p].friction,
-                        lambda_n: 0.0,
-                        lambda_t: [0.0; 2],
-                        normal: None,
-                        sep: 0.0,
-                        point_b: qb.inverse() * (c.point - pb),
-                    };
-                    // Warm start: the closest of them that was the same contact hands over its impulses.
-                    let mut best: Option<(f32, &Row)> = None;
-                    for o in old {
-                        let Some(n) = o.normal else { continue };
-                        let d = o.anchor_a.distance(row.anchor_a);
-                        if n.dot(patch.normal) >= WARM_COS
-                            && d <= tol
-                            && o.point_b.distance(row.point_b) <= tol
-                            && best.is_none_or(|(bd, _)| d < bd)
-                        {
-                            best = Some((d, o));
-                        }
-                    }
-                    if let Some((_, o)) = best {
-                        (row.lambda_n, row.lambda_t, row.normal) = (o.lambda_n, o.lambda_t, o.normal);
-                    }
-                    rows.push(row);
+    let prev_rows = &warm.rows;
+    let art_in = art.as_ref().map(|a| (a.model, &*a.state, a.control));
+    // Worlds are independent: stepped in parallel, each exactly as alone (results do not depend on the
+    // thread count).
+    let outs: Vec<WorldOut> = (0..world_count)
+        .into_par_iter()
+        .map(|w| {
+            let mut ok = true;
+            let base = w * nb;
+            // Index nb stands for the static world (infinite mass, identity pose).
+            let mut pos: Vec<(Vec3, Quat)> = (0..nb).map(|i| xf(&state.body_q[base + i])).collect();
+            pos.push((Vec3::ZERO, Quat::IDENTITY));
+            let mut vel = Vels { v: state.body_qd[base..base + nb].to_vec(), phi: vec![[Vec3::ZERO; 2]; links.len()] };
+            vel.v.push([Vec3::ZERO; 2]);
+            // This world's joints, and the link poses they give (used for the frame's rows: the caller keeps
+            // the link bodies' poses in the state at the joints' forward kinematics).
+            let mut joints = art_in.map(|(am, ast, actl)| {
+                let n = am.dof_count();
+                let w_slice = |v: &[f32]| v.get(w * n..(w + 1) * n).map(<[f32]>::to_vec).unwrap_or_default();
+                let q = ast.joint_q[w * n..(w + 1) * n].to_vec();
+                let qd = ast.joint_qd[w * n..(w + 1) * n].to_vec();
+                (q, qd, w_slice(&actl.joint_tau), w_slice(&actl.joint_target_q))
+            });
+            let mut link_pose = art_in.map(|(am, _, _)| vec![(Vec3::ZERO, Quat::IDENTITY); am.link_count()]);
+            if let (Some((am, _, _)), Some((q, _, _, _)), Some(lp)) = (art_in, joints.as_ref(), link_pose.as_mut()) {
+                dynamics::forward_kinematics(am, q, lp);
+                for (s, &i) in link_bodies.iter().enumerate() {
+                    pos[i] = lp[links[s] as usize];
                 }
             }
-        }
-        for _ in 0..cfg.substeps {
-            // The articulation's velocity before contact, and how its links answer impulses this substep.
-            if let (Some(a), Some((q, qd, tau, target)), Some(lp)) = (art.as_ref(), joints.as_mut(), link_pose.as_mut())
-            {
-                let n = a.model.dof_count();
-                let mut factor = vec![0.0f32; n * n];
-                dynamics::forward_kinematics(a.model, q, lp);
-                if dynamics::free_velocity(a.model, lp, q, qd, tau, target, h, &mut factor) {
-                    let resp = dynamics::ContactResponse::new(a.model, lp, &factor, &links);
+            let mut ctx = Step { flat, model, cfg, h, links: None, slot: &slot, link_bodies: &link_bodies };
+            let body = |b: u32| if b == NO_BODY { nb } else { b as usize };
+            // Rows from the reduced contacts, anchored in the bodies' frames at generation time.
+            let mut rows = Vec::new();
+            for p in 0..pair_count {
+                let (a, b) = (body(flat.pairs[p].body_a), body(flat.pairs[p].body_b));
+                let tol = WARM_DISTANCE * flat.pairs[p].contact_offset;
+                for (i, patch) in contacts.patches[w * pair_count + p].iter().enumerate() {
+                    // Last frame's rows of the same patch (rows are sorted by (pair, patch), then slot).
+                    let prev = &prev_rows[w];
+                    let old = &prev[prev.partition_point(|o| (o.pair, o.patch) < (p, i))
+                        ..prev.partition_point(|o| (o.pair, o.patch) <= (p, i))];
+                    for c in &patch.contacts {
+                        let ((pa, qa), (pb, qb)) = (pos[a], pos[b]);
+                        let mut row = Row {
+                            a,
+                            b,
+                            pair: p,
+                            patch: i,
+                            anchor_a: qa.inverse() * (c.point + flat.pairs[p].radius * patch.normal - pa),
+                            mu: flat.pairs[p].friction,
+                            lambda_n: 0.0,
+                            lambda_t: [0.0; 2],
+                            normal: None,
+                            sep: 0.0,
+                            point_b: qb.inverse() * (c.point - pb),
+                        };
+                        // Warm start: the closest of them that was the same contact hands over its impulses.
+                        let mut best: Option<(f32, &Row)> = None;
+                        for o in old {
+                            let Some(n) = o.normal else { continue };
+                            let d = o.anchor_a.distance(row.anchor_a);
+                            if n.dot(patch.normal) >= WARM_COS
+                                && d <= tol
+                                && o.point_b.distance(row.point_b) <= tol
+                                && best.is_none_or(|(bd, _)| d < bd)
+                            {
+                                best = Some((d, o));
+                            }
+                        }
+                        if let Some((_, o)) = best {
+                            (row.lambda_n, row.lambda_t, row.normal) = (o.lambda_n, o.lambda_t, o.normal);
+                        }
+                        rows.push(row);
+                    }
+                }
+            }
+            for _ in 0..cfg.substeps {
+                // The articulation's velocity before contact, and how its links answer impulses this substep.
+                if let (Some(a), Some((q, qd, tau, target)), Some(lp)) =
+                    (art.as_ref(), joints.as_mut(), link_pose.as_mut())
+                {
+                    let n = a.model.dof_count();
+                    let mut factor = vec![0.0f32; n * n];
+                    dynamics::forward_kinematics(a.model, q, lp);
+                    if dynamics::free_velocity(a.model, lp, q, qd, tau, target, h, &mut factor) {
+                        let resp = dynamics::ContactResponse::new(a.model, lp, &factor, &links);
+                        for (s, &i) in link_bodies.iter().enumerate() {
+                            vel.v[i] = resp.twist(s, qd);
+                        }
+                        ctx.links = Some(resp);
+                    }
+                    vel.phi.iter_mut().for_each(|p| *p = [Vec3::ZERO; 2]);
+                }
+                for (i, v) in vel.v.iter_mut().enumerate().take(nb) {
+                    if ctx.inv_m(i) > 0.0 {
+                        let [f, tau] = control.wrench(base + i);
+                        v[0] += (model.gravity + ctx.inv_m(i) * f) * h;
+                        // The world inverse inertia only where a torque acts (solver.wgsl alike).
+                        if tau != Vec3::ZERO {
+                            v[1] += ctx.inv_i_world(i, pos[i].1) * tau * h;
+                        }
+                    }
+                }
+                // Warm start: the previous substep's impulses (or the matched row's of last frame) along the
+                // normal each row was solved with. The sweeps then correct them: a row's impulses are those of
+                // the current substep (accumulated and clamped per substep).
+                for r in rows.iter() {
+                    if let Some(n) = r.normal {
+                        let t1 = n.any_orthonormal_vector();
+                        let imp = r.lambda_n * n + r.lambda_t[0] * t1 + r.lambda_t[1] * n.cross(t1);
+                        ctx.apply(r, &ctx.lever(r, &pos, n), &mut vel, imp);
+                    }
+                }
+                // The poses stand still during the sweeps, so each row's separation and normal are sampled in
+                // the first sweep and reused by the others (sampled again once the bodies have moved).
+                for it in 0..cfg.pos_iters {
+                    solve_rows(&ctx, &mut rows, &pos, &mut vel, true, it == 0);
+                }
+                for i in 0..nb {
+                    if (ctx.inv_m(i) > 0.0 || model.is_kinematic(i)) && slot[i].is_none() {
+                        let (p, q) = pos[i];
+                        let c = p + q * ctx.com(i);
+                        let c2 = c + vel.v[i][0] * h;
+                        let w = vel.v[i][1];
+                        let dq = Quat::from_xyzw(w.x, w.y, w.z, 0.0) * q * (0.5 * h);
+                        let q2 = Quat::from_vec4(Vec4::from(q) + Vec4::from(dq)).normalize();
+                        pos[i] = (c2 - q2 * ctx.com(i), q2);
+                    }
+                }
+                // The joints move with the impulses the position sweeps applied; the links follow.
+                if let (Some((am, _, _)), Some((q, qd, _, _)), Some(lp), Some(resp)) =
+                    (art_in, joints.as_mut(), link_pose.as_mut(), ctx.links.as_ref())
+                {
+                    resp.apply_impulses(&vel.phi, qd);
+                    dynamics::integrate_positions(am, q, qd, h);
+                    dynamics::forward_kinematics(am, q, lp);
+                    vel.phi.iter_mut().for_each(|p| *p = [Vec3::ZERO; 2]);
+                    for (s, &i) in link_bodies.iter().enumerate() {
+                        pos[i] = lp[links[s] as usize];
+                        // The substep's Jacobians serve the velocity sweeps too (the poses moved by h qd).
+                        vel.v[i] = resp.twist(s, qd);
+                    }
+                }
+                for it in 0..cfg.vel_iters {
+                    solve_rows(&ctx, &mut rows, &pos, &mut vel, false, it == 0);
+                }
+                if let (Some((_, qd, _, _)), Some(resp)) = (joints.as_mut(), ctx.links.as_ref()) {
+                    resp.apply_impulses(&vel.phi, qd);
+                    vel.phi.iter_mut().for_each(|p| *p = [Vec3::ZERO; 2]);
                     for (s, &i) in link_bodies.iter().enumerate() {
                         vel.v[i] = resp.twist(s, qd);
                     }
-                    ctx.links = Some(resp);
-                }
-                vel.phi.iter_mut().for_each(|p| *p = [Vec3::ZERO; 2]);
-            }
-            for (i, v) in vel.v.iter_mut().enumerate().take(nb) {
-                if ctx.inv_m(i) > 0.0 {
-                    let [f, tau] = control.wrench(base + i);
-                    v[0] += (model.gravity + ctx.inv_m(i) * f) * h;
-                    // The world inverse inertia only where a torque acts (solver.wgsl alike).
-                    if tau != Vec3::ZERO {
-                        v[1] += ctx.inv_i_world(i, pos[i].1) * tau * h;
-                    }
                 }
             }
-            // Warm start: the previous substep's impulses (or the matched row's of last frame) along the
-            // normal each row was solved with. The sweeps then correct them: a row's impulses are those of
-            // the current substep (accumulated and clamped per substep).
-            for r in rows.iter() {
-                if let Some(n) = r.normal {
-                    let t1 = n.any_orthonormal_vector();
-                    let imp = r.lambda_n * n + r.lambda_t[0] * t1 + r.lambda_t[1] * n.cross(t1);
-                    ctx.apply(r, &ctx.lever(r, &pos, n), &mut vel, imp);
-                }
-            }
-            // The poses stand still during the sweeps, so each row's separation and normal are sampled in
-            // the first sweep and reused by the others (sampled again once the bodies have moved).
-            for it in 0..cfg.pos_iters {
-                solve_rows(&ctx, &mut rows, &pos, &mut vel, true, it == 0);
-            }
+            let mut body_q = Vec::with_capacity(nb);
             for i in 0..nb {
-                if (ctx.inv_m(i) > 0.0 || model.is_kinematic(i)) && slot[i].is_none() {
-                    let (p, q) = pos[i];
-                    let c = p + q * ctx.com(i);
-                    let c2 = c + vel.v[i][0] * h;
-                    let w = vel.v[i][1];
-                    let dq = Quat::from_xyzw(w.x, w.y, w.z, 0.0) * q * (0.5 * h);
-                    let q2 = Quat::from_vec4(Vec4::from(q) + Vec4::from(dq)).normalize();
-                    pos[i] = (c2 - q2 * ctx.com(i), q2);
+                let (p, q) = pos[i];
+                body_q.push(TransformGpu::new(p, q));
+                let finite = p.is_finite() && q.is_finite() && vel.v[i][0].is_finite() && vel.v[i][1].is_finite();
+                if !finite || vel.v[i][0].length() > cfg.max_speed {
+                    ok = false;
                 }
             }
-            // The joints move with the impulses the position sweeps applied; the links follow.
-            if let (Some(a), Some((q, qd, _, _)), Some(lp), Some(resp)) =
-                (art.as_ref(), joints.as_mut(), link_pose.as_mut(), ctx.links.as_ref())
-            {
-                resp.apply_impulses(&vel.phi, qd);
-                dynamics::integrate_positions(a.model, q, qd, h);
-                dynamics::forward_kinematics(a.model, q, lp);
-                vel.phi.iter_mut().for_each(|p| *p = [Vec3::ZERO; 2]);
-                for (s, &i) in link_bodies.iter().enumerate() {
-                    pos[i] = lp[links[s] as usize];
-                    // The substep's Jacobians serve the velocity sweeps too (the poses moved by h qd).
-                    vel.v[i] = resp.twist(s, qd);
+            vel.v.truncate(nb);
+            let joints = joints.map(|(q, qd, _, _)| {
+                if !q.iter().chain(qd.iter()).all(|x| x.is_finite()) || qd.iter().any(|v| v.abs() > cfg.max_speed) {
+                    ok = false;
                 }
-            }
-            for it in 0..cfg.vel_iters {
-                solve_rows(&ctx, &mut rows, &pos, &mut vel, false, it == 0);
-            }
-            if let (Some((_, qd, _, _)), Some(resp)) = (joints.as_mut(), ctx.links.as_ref()) {
-                resp.apply_impulses(&vel.phi, qd);
-                vel.phi.iter_mut().for_each(|p| *p = [Vec3::ZERO; 2]);
-                for (s, &i) in link_bodies.iter().enumerate() {
-                    vel.v[i] = resp.twist(s, qd);
-                }
-            }
-        }
-        warm.rows[w] = rows;
-        for i in 0..nb {
-            let (p, q) = pos[i];
-            state.body_q[base + i] = TransformGpu::new(p, q);
-            state.body_qd[base + i] = vel.v[i];
-            let finite = p.is_finite() && q.is_finite() && vel.v[i][0].is_finite() && vel.v[i][1].is_finite();
-            if !finite || vel.v[i][0].length() > cfg.max_speed {
-                ok[w] = false;
-            }
-        }
-        if let (Some(a), Some((q, qd, _, _))) = (art.as_mut(), joints.as_ref()) {
+                (q, qd)
+            });
+            WorldOut { rows, body_q, body_qd: vel.v, joints, ok }
+        })
+        .collect();
+    let mut ok = Vec::with_capacity(world_count);
+    for (w, out) in outs.into_iter().enumerate() {
+        warm.rows[w] = out.rows;
+        state.body_q[w * nb..(w + 1) * nb].copy_from_slice(&out.body_q);
+        state.body_qd[w * nb..(w + 1) * nb].copy_from_slice(&out.body_qd);
+        if let (Some(a), Some((q, qd))) = (art.as_mut(), out.joints) {
             let n = a.model.dof_count();
-            a.state.joint_q[w * n..(w + 1) * n].copy_from_slice(q);
-            a.state.joint_qd[w * n..(w + 1) * n].copy_from_slice(qd);
-            if !q.iter().chain(qd.iter()).all(|x| x.is_finite()) || qd.iter().any(|v| v.abs() > cfg.max_speed) {
-                ok[w] = false;
-            }
+            a.state.joint_q[w * n..(w + 1) * n].copy_from_slice(&q);
+            a.state.joint_qd[w * n..(w + 1) * n].copy_from_slice(&qd);
         }
+        ok.push(out.ok);
     }
     ok
+}
+
+/// What one world's step hands back: its rows (next frame's warm start), bodies, joints and whether it
+/// stayed finite and within the speed bound.
+struct WorldOut {
+    rows: Vec<Row>,
+    body_q: Vec<TransformGpu>,
+    body_qd: Vec<[Vec3; 2]>,
+    joints: Option<(Vec<f32>, Vec<f32>)>,
+    ok: bool,
 }
 
 /// One frame of the CPU reference on contacts from `contacts` (the GPU kernels) at the state's poses: what
