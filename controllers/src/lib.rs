@@ -59,6 +59,7 @@
 // rustdoc would read them as links. Turn this off to check the real links (all resolved when this was written).
 #![allow(rustdoc::broken_intra_doc_links)]
 
+mod articulation;
 mod batch;
 mod common;
 pub mod config;
