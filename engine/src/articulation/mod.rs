@@ -22,6 +22,7 @@
 //! revolute axis passes through the child link's origin; links are stored parent before child.
 
 pub mod dynamics;
+pub mod gpu;
 pub mod sim;
 
 use crate::error::{EngineError, Result};
