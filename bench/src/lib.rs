@@ -2,6 +2,7 @@
 //! accuracy tests that share them.
 
 pub mod contact_scene;
+pub mod franka;
 pub mod pareto;
 pub mod pile;
 pub mod scene;

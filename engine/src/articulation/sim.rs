@@ -26,6 +26,10 @@ pub struct ArticulatedSim {
     pub warm: WarmStart,
     /// The contacts of the last frame (generated at its start).
     pub contacts: Option<ContactsHost>,
+    /// Wall time of the last frame's contact handling (generation, reduction and readback) and of its
+    /// coupled solve [s].
+    pub last_handling_s: f64,
+    pub last_solve_s: f64,
 }
 
 impl ArticulatedSim {
@@ -79,6 +83,8 @@ impl ArticulatedSim {
             joints,
             warm: WarmStart::default(),
             contacts: None,
+            last_handling_s: 0.0,
+            last_solve_s: 0.0,
         };
         sim.sync_links();
         Ok(sim)
@@ -108,9 +114,11 @@ impl ArticulatedSim {
     /// and the joint torques and drive targets `joint_control`. Returns per world whether it diverged
     /// (non-finite or over the solver's speed bound): such a world is left for the caller to reset.
     pub fn step(&mut self, gpu: &GpuContext, control: &Control, joint_control: &ArticulationControl) -> Vec<bool> {
+        let start = std::time::Instant::now();
         self.pipe.write_body_q(gpu, &self.state.body_q);
         self.pipe.run(gpu);
         let contacts = self.pipe.read(gpu);
+        let handled = std::time::Instant::now();
         let ok = step_cpu_articulated(
             &self.model.bodies,
             &mut self.state,
@@ -121,6 +129,8 @@ impl ArticulatedSim {
             &mut self.warm,
             Some(ArticulationStep { model: &self.articulation, state: &mut self.joints, control: joint_control }),
         );
+        self.last_handling_s = (handled - start).as_secs_f64();
+        self.last_solve_s = handled.elapsed().as_secs_f64();
         self.contacts = Some(contacts);
         ok.into_iter().map(|ok| !ok).collect()
     }

@@ -47,6 +47,27 @@ impl QueryShape {
         q.triangles.extend(mesh.positions.iter().map(|p| [*p; 3]));
         q
     }
+    /// [`QueryShape::cuboid`] plus point queries at the centres of an `n` x `n` grid of cells on each face,
+    /// so that a face pressed on a smaller flat reports several points inside it.
+    pub fn cuboid_grid(h: Vec3, n: u32) -> Self {
+        let mut q = Self::cuboid(h);
+        let t = |i: u32| -1.0 + 2.0 * (i as f32 + 0.5) / n as f32;
+        for axis in 0..3 {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            for side in [-1.0f32, 1.0] {
+                for i in 0..n {
+                    for j in 0..n {
+                        let mut p = Vec3::ZERO;
+                        p[axis] = side * h[axis];
+                        p[u] = t(i) * h[u];
+                        p[v] = t(j) * h[v];
+                        q.triangles.push([p; 3]);
+                    }
+                }
+            }
+        }
+        q
+    }
     /// A sphere of `radius` [m] at the shape origin.
     pub fn sphere(radius: f32) -> Self {
         QueryShape { triangles: vec![[Vec3::ZERO; 3]], radius }

@@ -68,6 +68,12 @@ pub enum ShapeGeometry {
     Plane,
     /// A box centred at the origin, half extents [m].
     Box { half_extents: Vec3 },
+    /// A box that, where it is the queried shape, is queried at a grid of `points_per_edge` x
+    /// `points_per_edge` points on each face besides its corners and face triangles (as Factory subdivides
+    /// its finger meshes, PhysX making one contact per triangle): a finger pad wider than the flat it
+    /// presses on then touches it at several points, not at a face triangle's single deepest point. As
+    /// an SDF it is the plain box.
+    GridBox { half_extents: Vec3, points_per_edge: u32 },
     /// A sphere centred at the origin, radius [m].
     Sphere { radius: f32 },
     /// A capsule along z centred at the origin: segment from -half_length to +half_length [m], radius [m].
@@ -117,9 +123,14 @@ fn check_shape<'a>(s: &'a ShapeDesc, which: &str) -> Result<Kind<'a>> {
     }
     Ok(match &s.geometry {
         ShapeGeometry::Plane => Kind::Plane,
-        ShapeGeometry::Box { half_extents: h } => {
+        ShapeGeometry::Box { half_extents: h } | ShapeGeometry::GridBox { half_extents: h, .. } => {
             if !(positive(h.x) && positive(h.y) && positive(h.z)) {
                 return Err(bad("half_extents", format!("{h} ({which} shape)"), "finite and > 0 [m] on every axis"));
+            }
+            if let ShapeGeometry::GridBox { points_per_edge: n, .. } = s.geometry {
+                if !(2..=16).contains(&n) {
+                    return Err(bad("points_per_edge", format!("{n} ({which} shape)"), "2 to 16"));
+                }
             }
             Kind::Primitive
         }
@@ -184,6 +195,9 @@ fn require_volume(hull: &TriMesh, mesh: &TriMesh) -> Result<()> {
 fn primitive_query(g: &ShapeGeometry) -> QueryShape {
     match *g {
         ShapeGeometry::Box { half_extents } => QueryShape::cuboid(half_extents),
+        ShapeGeometry::GridBox { half_extents, points_per_edge } => {
+            QueryShape::cuboid_grid(half_extents, points_per_edge)
+        }
         ShapeGeometry::Sphere { radius } => QueryShape::sphere(radius),
         ShapeGeometry::Capsule { radius, half_length } => QueryShape::capsule(radius, half_length),
         _ => unreachable!("only primitives"),
@@ -194,7 +208,7 @@ fn primitive_query(g: &ShapeGeometry) -> QueryShape {
 /// exact (a box queries 12 triangles and 8 corners; a capsule a segment; a sphere a point).
 fn sdf_preference(g: &ShapeGeometry) -> u8 {
     match g {
-        ShapeGeometry::Box { .. } => 2,
+        ShapeGeometry::Box { .. } | ShapeGeometry::GridBox { .. } => 2,
         ShapeGeometry::Capsule { .. } => 1,
         _ => 0,
     }
@@ -222,7 +236,9 @@ fn sampled(aabb: Vec3, resolution: u32, distance: impl Fn(Vec3) -> f32) -> Resul
 /// The SDF grid of a primitive at [`CONVEX_SDF_RESOLUTION`].
 fn primitive_sdf(g: &ShapeGeometry, cache: &SdfCache) -> Result<SdfShape> {
     let grid = match *g {
-        ShapeGeometry::Box { half_extents } => return bake_mesh(&box_mesh(half_extents), CONVEX_SDF_RESOLUTION, cache),
+        ShapeGeometry::Box { half_extents } | ShapeGeometry::GridBox { half_extents, .. } => {
+            return bake_mesh(&box_mesh(half_extents), CONVEX_SDF_RESOLUTION, cache)
+        }
         ShapeGeometry::Sphere { radius } => {
             sampled(Vec3::splat(radius), CONVEX_SDF_RESOLUTION, |p| p.length() - radius)?
         }
@@ -427,6 +443,32 @@ mod tests {
             let vol: f32 = s.query.triangles.iter().map(|[p, q, r]| p.dot(q.cross(*r)) / 6.0).sum();
             assert!((vol - 0.07 * 0.02 * 0.02).abs() < 1e-9, "hull volume {vol}");
         }
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    /// Regression (the Franka's pads let a gripped nut turn and slide in the hand): a pad wider than the flat
+    /// it presses on touched it only at its two face triangles' deepest points. A grid box adds points at
+    /// the centres of n x n cells on every face, all on the box's surface, and is refused outside 2..=16.
+    #[test]
+    fn grid_box_queries_its_faces_at_grid_points() {
+        let h = Vec3::new(0.00875, 0.004, 0.0088);
+        let q = primitive_query(&ShapeGeometry::GridBox { half_extents: h, points_per_edge: 4 });
+        assert_eq!(q.triangles.len(), 12 + 8 + 6 * 16);
+        let points: Vec<Vec3> = q.triangles[20..].iter().map(|t| t[0]).collect();
+        for p in &points {
+            let on_face = (0..3).filter(|&k| (p[k].abs() - h[k]).abs() < 1e-7).count();
+            assert_eq!(on_face, 1, "{p} is not inside one face");
+            assert!((0..3).all(|k| p[k].abs() <= h[k] + 1e-7));
+        }
+        // The face y = +h.y: 16 points, 4 distinct x and 4 distinct z, spread over the face.
+        let face: Vec<&Vec3> = points.iter().filter(|p| (p.y - h.y).abs() < 1e-7).collect();
+        assert_eq!(face.len(), 16);
+        assert!(face.iter().any(|p| p.x < -0.5 * h.x) && face.iter().any(|p| p.x > 0.5 * h.x));
+        let bad = ShapeDesc::new(0, ShapeGeometry::GridBox { half_extents: h, points_per_edge: 1 });
+        let (c, dir) = cache("gridbox");
+        let table = ShapeDesc::fixed((Vec3::ZERO, Quat::IDENTITY), ShapeGeometry::Plane);
+        let err = pair_spec(&bad, &table, 1e-3, &c).unwrap_err().to_string();
+        assert!(err.contains("points_per_edge"), "{err}");
         std::fs::remove_dir_all(dir).ok();
     }
 
