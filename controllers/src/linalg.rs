@@ -24,61 +24,18 @@ pub const SPD6_REGULARISER: f32 = 1e-7;
 /// 5-8 sweeps for the Jacobians here, so the bound only matters for NaN input.
 pub const SVD_MAX_SWEEPS: usize = 30;
 
-/// Cholesky factorisation `A = L Lᵀ` in place: on return the lower triangle (with the diagonal) of `a` holds L;
-/// the strict upper triangle is left as it was and never read by the solves.
-///
-/// `a`: row-major n x n, symmetric positive definite (only the lower triangle is read).
-/// Returns false if a pivot was not positive (A not numerically PD, or NaN); the pivot is then floored at
-/// `1e-12·max|diag A|` so the factor stays usable (the solve is then of a nearby SPD matrix) rather than
-/// producing NaN torques.
+/// Cholesky factorisation `A = L Lᵀ` in place (row-major n x n, `n <= MAX_N`; the engine's
+/// [`factory_engine::articulation::dynamics::cholesky_factor`]): the lower triangle of `a` holds L on return.
+/// Returns false if a pivot was not positive; it is then floored so the factor stays usable.
 pub fn cholesky_factor(a: &mut [f32], n: usize) -> bool {
     debug_assert!(n <= MAX_N && a.len() >= n * n);
-    let mut scale = 0.0f32;
-    for i in 0..n {
-        scale = scale.max(a[i * n + i].abs());
-    }
-    let floor = if scale > 0.0 { scale * 1e-12 } else { 1e-30 };
-    let mut ok = true;
-    for j in 0..n {
-        let mut d = a[j * n + j];
-        for k in 0..j {
-            d -= a[j * n + k] * a[j * n + k];
-        }
-        // `!(d > floor)` also catches NaN.
-        if !(d > floor) {
-            ok = false;
-            d = floor;
-        }
-        let ljj = d.sqrt();
-        a[j * n + j] = ljj;
-        for i in j + 1..n {
-            let mut s = a[i * n + j];
-            for k in 0..j {
-                s -= a[i * n + k] * a[j * n + k];
-            }
-            a[i * n + j] = s / ljj;
-        }
-    }
-    ok
+    factory_engine::articulation::dynamics::cholesky_factor(n, a)
 }
 
 /// Solves `L Lᵀ x = b` in place (`b` becomes x) with the factor from [`cholesky_factor`].
 pub fn cholesky_solve_factored(l: &[f32], n: usize, b: &mut [f32]) {
     debug_assert!(n <= MAX_N && l.len() >= n * n && b.len() >= n);
-    for i in 0..n {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= l[i * n + k] * b[k];
-        }
-        b[i] = s / l[i * n + i];
-    }
-    for i in (0..n).rev() {
-        let mut s = b[i];
-        for k in i + 1..n {
-            s -= l[k * n + i] * b[k];
-        }
-        b[i] = s / l[i * n + i];
-    }
+    factory_engine::articulation::dynamics::cholesky_substitute(n, l, b);
 }
 
 /// Solves `A x = b` in place for SPD `A` (row-major n x n, `n <= MAX_N`); returns [`cholesky_factor`]'s flag.

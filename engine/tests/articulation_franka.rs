@@ -271,3 +271,89 @@ fn arm_holds_its_pose_under_gravity_compensation() {
     let end = world_dynamics(&m, &fall.joint_q, &[0.0; 9], &tip).frame_pose.0;
     assert!((end - start).length() > 0.05, "an uncompensated arm should sag: moved {}", (end - start).length());
 }
+
+/// Bad input: a joint type an articulation cannot take, or a mimic coupling, is refused naming the joint
+/// and the file.
+#[test]
+fn unsupported_joint_types_are_refused_naming_the_joint_and_file() {
+    use factory_engine::urdf::parse_urdf;
+    let doc = |joint: &str| {
+        format!(
+            r#"<robot name="r"><link name="a"/><link name="b"/><link name="c"/>
+            <joint name="j1" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>
+              <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+            {joint}</robot>"#
+        )
+    };
+    let path = std::path::Path::new("robots/bad.urdf");
+    for (joint, name, what) in [
+        (r#"<joint name="free" type="floating"><parent link="b"/><child link="c"/></joint>"#, "free", "floating"),
+        (
+            r#"<joint name="slide" type="planar"><parent link="b"/><child link="c"/><axis xyz="0 0 1"/></joint>"#,
+            "slide",
+            "planar",
+        ),
+        (
+            r#"<joint name="twin" type="revolute"><parent link="b"/><child link="c"/><axis xyz="0 0 1"/>
+               <limit lower="-1" upper="1" effort="1" velocity="1"/><mimic joint="j1"/></joint>"#,
+            "twin",
+            "mimics",
+        ),
+    ] {
+        let urdf = parse_urdf(&doc(joint), path, std::path::Path::new(".")).unwrap();
+        let err =
+            ArticulationModel::from_urdf(&urdf, (Vec3::ZERO, Quat::IDENTITY), Vec3::ZERO).unwrap_err().to_string();
+        assert!(err.contains(name) && err.contains(what) && err.contains("bad.urdf"), "{err}");
+    }
+}
+
+/// The analytic Jacobian maps joint velocities to the rate of the fingertip's rotation vector: against
+/// finite differences of the DH chain's axis-angle (away from the 180-degree flip of the shortest arc).
+#[test]
+fn analytic_jacobian_matches_finite_differences_of_the_rotation_vector() {
+    use factory_engine::articulation::dynamics::analytic_jacobian;
+    use factory_engine::articulation::rotation::axis_angle_from_quat;
+    let m = franka();
+    let tip = m.frame("panda_fingertip_centered").unwrap();
+    let n = m.dof_count();
+    let mut rng = SplitMix64(5);
+    let mut poses = vec![(Vec3::ZERO, Quat::IDENTITY); m.link_count()];
+    let (mut jg, mut ja) = (vec![0.0f32; 6 * n], vec![0.0f32; 6 * n]);
+    let mut worst = 0.0f64;
+    let mut checked = 0;
+    while checked < 30 {
+        let q = random_q(&m, &mut rng);
+        forward_kinematics(&m, &q, &mut poses);
+        let (p, r) = frame_pose(&poses, tip.link, tip.offset);
+        if axis_angle_from_quat(r).length() > 2.8 {
+            continue;
+        }
+        checked += 1;
+        point_jacobian(&m, &poses, tip.link, p, &mut jg);
+        analytic_jacobian(&jg, n, r, &mut ja);
+        let q64: Vec<f64> = q.iter().map(|&x| x as f64).collect();
+        let phi = |q: &[f64]| {
+            let t = dh_fingertip(q);
+            let quat = glam::DQuat::from_mat3(&glam::DMat3::from_mat4(t));
+            let (v, w) = if quat.w < 0.0 { (-quat.xyz(), -quat.w) } else { (quat.xyz(), quat.w) };
+            let s = v.length();
+            if s < 1e-12 {
+                DVec3::ZERO
+            } else {
+                v * (2.0 * s.atan2(w) / s)
+            }
+        };
+        let eps = 1e-6;
+        for d in 0..7 {
+            let (mut qp, mut qm) = (q64.clone(), q64.clone());
+            qp[d] += eps;
+            qm[d] -= eps;
+            let rate = (phi(&qp) - phi(&qm)) / (2.0 * eps);
+            for k in 0..3 {
+                worst = worst.max((ja[(3 + k) * n + d] as f64 - rate[k]).abs());
+                assert_eq!(ja[k * n + d], jg[k * n + d], "the linear rows are the geometric ones");
+            }
+        }
+    }
+    assert!(worst < 1e-3, "analytic Jacobian vs finite differences: {worst}");
+}

@@ -85,6 +85,21 @@ pub fn point_jacobian(model: &ArticulationModel, poses: &[Pose], link: u32, poin
     });
 }
 
+/// The analytic Jacobian of a frame from its geometric one (both 6 x dof_count row-major): rows (vx, vy,
+/// vz, dphi/dt) with phi the rotation vector (axis-angle, shortest arc) of the frame's orientation `quat`,
+/// J_a = blockdiag(I, E(phi)^-1) J_g (Siciliano et al. 2009, sec. 3.6; E in [`super::rotation`]).
+pub fn analytic_jacobian(geometric: &[f32], n: usize, quat: Quat, out: &mut [f32]) {
+    let e_inv = super::rotation::axis_angle_rate_map_inverse(super::rotation::axis_angle_from_quat(quat));
+    out[..3 * n].copy_from_slice(&geometric[..3 * n]);
+    for d in 0..n {
+        let w = Vec3::new(geometric[3 * n + d], geometric[4 * n + d], geometric[5 * n + d]);
+        let r = e_inv * w;
+        for k in 0..3 {
+            out[(3 + k) * n + d] = r[k];
+        }
+    }
+}
+
 /// Joint-space mass matrix at the link poses `poses`, dof_count x dof_count row-major, with the
 /// armature on its diagonal.
 pub fn mass_matrix(model: &ArticulationModel, poses: &[Pose], out: &mut [f32]) {
@@ -203,28 +218,35 @@ pub fn inverse_dynamics(
     }
 }
 
-/// In-place Cholesky factorisation a = L L^T of the SPD matrix `a` (n x n row-major; L is left in the lower
-/// triangle). Returns false if `a` is not positive definite.
+/// In-place Cholesky factorisation a = L L^T of the SPD matrix `a` (n x n row-major; only its lower
+/// triangle is read, and L is left there; the strict upper triangle is left as it was). Returns false if a
+/// pivot was not positive (not numerically positive definite, or NaN): that pivot is then floored at
+/// 1e-12 max|diag a| so the factor stays usable (it solves a nearby SPD system) instead of making NaNs.
 pub fn cholesky_factor(n: usize, a: &mut [f32]) -> bool {
+    let scale = (0..n).map(|i| a[i * n + i].abs()).fold(0.0f32, f32::max);
+    let floor = if scale > 0.0 { scale * 1e-12 } else { 1e-30 };
+    let mut ok = true;
     for j in 0..n {
-        let mut s = a[j * n + j];
+        let mut d = a[j * n + j];
         for k in 0..j {
-            s -= a[j * n + k] * a[j * n + k];
+            d -= a[j * n + k] * a[j * n + k];
         }
-        if !(s > 0.0) {
-            return false;
+        // `!(d > floor)` also catches NaN.
+        if !(d > floor) {
+            ok = false;
+            d = floor;
         }
-        let d = s.sqrt();
-        a[j * n + j] = d;
+        let ljj = d.sqrt();
+        a[j * n + j] = ljj;
         for i in j + 1..n {
             let mut s = a[i * n + j];
             for k in 0..j {
                 s -= a[i * n + k] * a[j * n + k];
             }
-            a[i * n + j] = s / d;
+            a[i * n + j] = s / ljj;
         }
     }
-    true
+    ok
 }
 
 /// Solves L L^T x = b in place with the factor of [`cholesky_factor`].

@@ -23,6 +23,7 @@
 
 pub mod dynamics;
 pub mod gpu;
+pub mod rotation;
 pub mod sim;
 
 use crate::error::{EngineError, Result};
