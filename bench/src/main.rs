@@ -58,7 +58,7 @@ struct SceneArgs {
     /// Parallel worlds.
     #[arg(long, default_value_t = 1)]
     worlds: u32,
-    /// Simulated time [s] [default: 1; franka-nut-bolt: 45, the limit of its episode].
+    /// Simulated time [s] [default: 1; franka-nut-bolt: 60, the limit of its episode].
     #[arg(long)]
     seconds: Option<f32>,
     /// Frame time step [s].
@@ -76,6 +76,10 @@ struct SceneArgs {
     /// Gauss-Seidel passes over each contact patch per sweep (SolverConfig::patch_iters).
     #[arg(long, default_value_t = factory_engine::solver::SolverConfig::default().patch_iters)]
     patch_iters: u32,
+    /// Passes over each patch that touches an articulation link (SolverConfig::link_patch_iters;
+    /// franka-nut-bolt) [default: 1; franka-nut-bolt: its scene default].
+    #[arg(long)]
+    link_patch_iters: Option<u32>,
     /// Coulomb friction per patch instead of per contact (SolverConfig::friction_per_patch).
     #[arg(long)]
     friction_per_patch: bool,
@@ -99,6 +103,9 @@ struct SceneArgs {
     /// franka-nut-bolt: print world 0's stage, fingertip and nut every N frames.
     #[arg(long, default_value_t = 0)]
     trace_frames: u32,
+    /// franka-nut-bolt: the world --trace-frames prints.
+    #[arg(long, default_value_t = 0)]
+    trace_world: usize,
     /// Pile scenes (coloured solver): a body that stays within --sleep-distance-mm and --sleep-angle of one
     /// pose for this many frames falls asleep until a moving body touches it (0: never; PhysX's wake
     /// counter of 0.4 s is 24 frames at 60 Hz).
@@ -228,6 +235,20 @@ enum Cmd {
         #[arg(long, default_value = "docs/pareto_nut_bolt.svg")]
         out_plot: PathBuf,
     },
+    /// Cost of a control step for the Franka at N worlds: the articulation quantities the controllers read
+    /// (fingertip pose, Jacobian, mass matrix, gravity; `ArmBatch::from_articulation`) and each of the
+    /// seven controllers' torques, on the host.
+    Controllers {
+        /// Parallel worlds.
+        #[arg(long, default_value_t = 128)]
+        worlds: u32,
+        /// Timed repetitions (the median is reported).
+        #[arg(long, default_value_t = 50)]
+        repeats: u32,
+        /// Print one JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
     /// Contact generation + reduction for N parallel copies of a shape pair (paper Table I).
     Contacts {
         /// Which generated pair (ignored with --mesh-a/--mesh-b).
@@ -311,10 +332,12 @@ fn main() -> Result<()> {
                 worlds: args.worlds,
                 seconds: args.seconds.unwrap_or(base.seconds),
                 seed: args.seed,
-                // The paper's Table II row: 4 substeps, 16 position iterations (0 velocity iterations, as
-                // Factory's tasks); --substeps / --pos-iters / --vel-iters override.
+                // 4 substeps as the paper's Table II row, 32 position iterations (the paper: 16; see
+                // FrankaNutBoltRun::default), 0 velocity iterations as Factory's tasks; --substeps /
+                // --pos-iters / --vel-iters override.
                 solver: factory_engine::solver::SolverConfig {
                     vel_iters: args.vel_iters.unwrap_or(0),
+                    link_patch_iters: args.link_patch_iters.unwrap_or(base.solver.link_patch_iters),
                     ..args.solver(&base.solver)
                 },
                 contact: ContactConfig {
@@ -325,6 +348,7 @@ fn main() -> Result<()> {
                 },
                 thread_mu: args.mu.unwrap_or(base.thread_mu),
                 trace_every: args.trace_frames,
+                trace_world: args.trace_world,
                 ..base
             };
             print_report(&run_franka_nut_bolt(GpuContext::global()?, &run)?, args.json)?;
@@ -461,6 +485,9 @@ fn main() -> Result<()> {
                 args.out_csv.display(),
                 args.out_plot.display()
             );
+        }
+        Cmd::Controllers { worlds, repeats, json } => {
+            print_report(&factory_bench::franka::bench_controllers(worlds, repeats)?, json)?;
         }
         Cmd::Contacts {
             pair,

@@ -141,6 +141,11 @@ pub struct SolverConfig {
     /// sweep (no SDF samples): a cheap inner solve of the patch. Plain Gauss-Seidel (1) converges slowly
     /// where a patch's contacts act almost alike, as on the small base of a tall body (module doc).
     pub patch_iters: u32,
+    /// Gauss-Seidel passes per sweep over each patch that touches an articulation link (at least
+    /// `patch_iters`; [`step_cpu_articulated`] only). A finger pad holding a 30 g nut against a 20 kg arm
+    /// is a chain with a mass ratio near 1:100, which plain sweeps converge slowly: the pads crept down a
+    /// nut pressed on its bolt. The rows are few (a pad's few contacts), so extra passes are cheap.
+    pub link_patch_iters: u32,
     /// Coulomb friction per patch (the paper's III-B: "Coulomb friction per patch"): each contact may carry
     /// tangential impulse up to mu times an equal share of its patch's total normal impulse, so the patch
     /// as a whole obeys the cone and a contact that momentarily carries little load does not slip. Off:
@@ -159,6 +164,7 @@ impl Default for SolverConfig {
             rest_offset: 0.0,
             max_speed: 100.0,
             patch_iters: 1,
+            link_patch_iters: 1,
             friction_per_patch: false,
         }
     }
@@ -234,6 +240,19 @@ struct Row {
     sep: f32,
     /// The contact point in b's body frame at the frame's start [m] (to match the row next frame).
     point_b: Vec3,
+    /// What the sweeps after a sample reuse: the lever arms and inverse inertias at the sampled normal,
+    /// the tangents, and the inverse effective masses along the normal and the tangents (None until the
+    /// row's first sample of the substep; the poses and the articulation's response stand still between
+    /// samples, so these are the values each sweep would recompute, bitwise).
+    cache: Option<RowCache>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct RowCache {
+    lever: Lever,
+    tangents: [Vec3; 2],
+    /// Inverse effective mass along the normal, tangent 1 and tangent 2 [1/kg].
+    k: [f32; 3],
 }
 
 /// Warm-start match (solver.wgsl's WARM_DISTANCE, WARM_COS): a row takes over the impulses of the row in
@@ -408,6 +427,7 @@ pub fn step_cpu_articulated(
                             normal: None,
                             sep: 0.0,
                             point_b: qb.inverse() * (c.point - pb),
+                            cache: None,
                         };
                         // Warm start: the closest of them that was the same contact hands over its impulses.
                         let mut best: Option<(f32, &Row)> = None;
@@ -671,6 +691,7 @@ impl Step<'_> {
 
 /// Lever arms from each body's centre of mass to a row's contact point [m] and the bodies' world-frame
 /// inverse inertias [1/(kg m^2)] (zero for static and kinematic bodies).
+#[derive(Clone, Copy, Debug)]
 struct Lever {
     ra: Vec3,
     rb: Vec3,
@@ -682,7 +703,9 @@ struct Lever {
 /// `resample`, then `patch_iters - 1` more times on the sampled geometry (solver.wgsl's `sweep`).
 fn solve_rows(ctx: &Step, rows: &mut [Row], pos: &[(Vec3, Quat)], vel: &mut Vels, bias: bool, resample: bool) {
     for patch in rows.chunk_by_mut(|x, y| (x.pair, x.patch) == (y.pair, y.patch)) {
-        for pass in 0..ctx.cfg.patch_iters {
+        let link = ctx.slot[patch[0].a].is_some() || ctx.slot[patch[0].b].is_some();
+        let passes = if link { ctx.cfg.patch_iters.max(ctx.cfg.link_patch_iters) } else { ctx.cfg.patch_iters };
+        for pass in 0..passes {
             for i in 0..patch.len() {
                 solve_row(ctx, patch, i, pos, vel, bias, resample && pass == 0);
             }
@@ -722,6 +745,7 @@ fn solve_row(
         let n = shape_b.rotate(g / glen);
         r.normal = Some(n);
         r.sep = phi - pair.radius - cfg.rest_offset;
+        r.cache = None;
         (n, r.sep)
     } else {
         match r.normal {
@@ -729,11 +753,23 @@ fn solve_row(
             None => return,
         }
     };
-    let l = ctx.lever(r, pos, n);
+    let c = match r.cache {
+        Some(c) => c,
+        None => {
+            let lever = ctx.lever(r, pos, n);
+            let t1 = n.any_orthonormal_vector();
+            let t2 = n.cross(t1);
+            let k = [ctx.eff(r, &lever, n), ctx.eff(r, &lever, t1), ctx.eff(r, &lever, t2)];
+            let c = RowCache { lever, tangents: [t1, t2], k };
+            r.cache = Some(c);
+            c
+        }
+    };
+    let l = c.lever;
     let (ra, rb) = (l.ra, l.rb);
     let (a, b) = (r.a, r.b);
     let rel = |vel: &Vels| (vel.v[a][0] + vel.v[a][1].cross(ra)) - (vel.v[b][0] + vel.v[b][1].cross(rb));
-    let k = ctx.eff(r, &l, n);
+    let k = c.k[0];
     if k <= 0.0 {
         return;
     }
@@ -752,12 +788,10 @@ fn solve_row(
     ctx.apply(r, &l, vel, n * d);
     let mu = r.mu;
     if mu > 0.0 {
-        let t1 = n.any_orthonormal_vector();
-        let t2 = n.cross(t1);
         let limit = if pooled { mu * share(patch) } else { mu * patch[i].lambda_n };
         let r = &mut patch[i];
-        for (j, t) in [t1, t2].into_iter().enumerate() {
-            let kt = ctx.eff(r, &l, t);
+        for (j, t) in c.tangents.into_iter().enumerate() {
+            let kt = c.k[1 + j];
             if kt <= 0.0 {
                 continue;
             }
