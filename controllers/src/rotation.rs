@@ -47,8 +47,8 @@ pub fn pose_error(target_pos: Vec3, target_quat: Quat, pos: Vec3, quat: Quat, ki
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Mat3;
     use crate::linalg::tests::Rng;
+    use glam::Mat3;
     use std::f32::consts::{FRAC_PI_6, PI};
 
     fn close(a: Vec3, b: Vec3, tol: f32) -> bool {
