@@ -1,0 +1,119 @@
+//! The batched [`Env`] plugin trait and the buffers it fills.
+//!
+//! Semantics follow Gymnasium's vector envs (`gymnasium.vector.VectorEnv`, autoreset mode "same-step"):
+//! every call to [`Env::step`] advances all `env_count` worlds by one control step and reports, per world, the
+//! reward, whether the episode reached a terminal state (`terminated`: success or failure, no value beyond it)
+//! or was cut by the time limit (`truncated`: the value beyond it is bootstrapped by the learner), and whether
+//! it ended in success. A world whose episode ended is reset inside the same call (a masked reset: the others
+//! are untouched), and the observation returned for it is the first of its new episode. This is what
+//! IsaacGymEnvs does (`reset_buf` then `reset_idx` within `post_physics_step`), so a learner ported from it
+//! needs no change: with `value_bootstrap` it adds `gamma * V(s_t)` to the reward of truncated steps.
+//!
+//! All buffers are flat, world-first, and `f32` (flags are 0.0 or 1.0) so they go to a tensor in one copy.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{EnvError, Result};
+
+/// What an env consumes and produces; fixed for its lifetime.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EnvSpec {
+    /// The env's registered `type` name (`point_mass`, ...).
+    pub name: String,
+    /// Worlds stepped together (the batch axis).
+    pub env_count: usize,
+    /// One name per observation entry, in order (`goal_dx_m`, ...); its length is the observation size.
+    pub observation_names: Vec<String>,
+    /// One name per action entry, in order; its length is the action size. Actions are in [-1, 1] (values
+    /// outside are clipped by the env).
+    pub action_names: Vec<String>,
+    /// Control steps after which an episode is truncated.
+    pub max_episode_steps: u32,
+}
+
+impl EnvSpec {
+    /// Entries per observation.
+    pub fn observation_dim(&self) -> usize {
+        self.observation_names.len()
+    }
+
+    /// Entries per action.
+    pub fn action_dim(&self) -> usize {
+        self.action_names.len()
+    }
+}
+
+/// What one [`Env::step`] (or [`Env::reset`]) writes, for all worlds.
+#[derive(Clone, Debug, Default)]
+pub struct StepBuffers {
+    /// Observations [units per `EnvSpec::observation_names`], shape [env_count * observation_dim]; for a world
+    /// whose episode ended this step, the first observation of its next episode.
+    pub observation: Vec<f32>,
+    /// Rewards of this step, shape [env_count].
+    pub reward: Vec<f32>,
+    /// 1.0 where the episode reached a terminal state this step (success or failure), else 0.0; [env_count].
+    pub terminated: Vec<f32>,
+    /// 1.0 where the episode hit `max_episode_steps` this step without terminating, else 0.0; [env_count].
+    pub truncated: Vec<f32>,
+    /// 1.0 where the episode ended in success this step, else 0.0; [env_count].
+    pub success: Vec<f32>,
+}
+
+impl StepBuffers {
+    /// Zeroed buffers sized for `spec`.
+    pub fn new(spec: &EnvSpec) -> Self {
+        let n = spec.env_count;
+        Self {
+            observation: vec![0.0; n * spec.observation_dim()],
+            reward: vec![0.0; n],
+            terminated: vec![0.0; n],
+            truncated: vec![0.0; n],
+            success: vec![0.0; n],
+        }
+    }
+
+    /// 1.0 where the episode ended this step for any reason.
+    pub fn done(&self, world: usize) -> bool {
+        self.terminated[world] != 0.0 || self.truncated[world] != 0.0
+    }
+}
+
+/// A batch of `env_count` worlds stepped together.
+///
+/// Implementations write into the caller's [`StepBuffers`] (sized by [`StepBuffers::new`]); stepping does not
+/// fail (a diverging world is the env's to detect and end as a failure), building the env does.
+pub trait Env: Send {
+    /// The env's spec.
+    fn spec(&self) -> &EnvSpec;
+
+    /// Starts a new episode in every world and writes the observations (rewards and flags are zeroed).
+    fn reset(&mut self, out: &mut StepBuffers);
+
+    /// Applies `action` (shape [env_count * action_dim], clipped to [-1, 1]) for one control step, writes the
+    /// step's results and resets the worlds whose episode ended (see the module docs).
+    fn step(&mut self, action: &[f32], out: &mut StepBuffers);
+
+    /// Hook: the env's whole state (worlds, episode counters, generator) as bytes, so a checkpoint can resume
+    /// exactly; `None` (the default) when the env cannot, and a resumed run then starts fresh episodes.
+    fn save_state(&self) -> Option<Vec<u8>> {
+        None
+    }
+
+    /// Hook: restores what [`save_state`](Self::save_state) wrote for an env of the same spec.
+    fn load_state(&mut self, _bytes: &[u8]) -> Result<()> {
+        Err(EnvError::InvalidValue {
+            field: "state",
+            reason: format!("env `{}` cannot restore a state", self.spec().name),
+        })
+    }
+
+    /// Checks `action`'s length against the spec; the trainer calls this once before rolling out.
+    fn check_action_len(&self, len: usize) -> Result<()> {
+        let spec = self.spec();
+        let expected = spec.env_count * spec.action_dim();
+        if len != expected {
+            return Err(EnvError::Shape { field: "action", len, expected });
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,13 @@
+//! factory-envs: batched environments behind one [`Env`] plugin trait (Gymnasium semantics: terminated vs
+//! truncated, auto-reset of finished worlds inside `step`), an explicit registry selected by `type` in TOML,
+//! and the tasks. Crates depend downward: rl -> envs -> controllers -> engine.
+
+pub mod env;
+pub mod error;
+pub mod point_mass;
+pub mod registry;
+
+pub use env::{Env, EnvSpec, StepBuffers};
+pub use error::{EnvError, Result};
+pub use point_mass::{PointMass, PointMassConfig};
+pub use registry::{build, EnvConfig, NAMES};

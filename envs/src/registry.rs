@@ -1,0 +1,78 @@
+//! The explicit env registry: configs select an env by `type`.
+//!
+//! ```toml
+//! [env]
+//! type = "point_mass"
+//! dt = 0.05
+//! ```
+
+use serde::{Deserialize, Serialize};
+
+use crate::env::Env;
+use crate::error::{EnvError, Result};
+use crate::point_mass::{PointMass, PointMassConfig};
+
+/// The registered envs' `type` names.
+pub const NAMES: &[&str] = &["point_mass"];
+
+/// An env config: the `[env]` table, selected by its `type` key.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum EnvConfig {
+    /// [`PointMass`].
+    PointMass(PointMassConfig),
+}
+
+impl EnvConfig {
+    /// The config's registered name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            EnvConfig::PointMass(_) => "point_mass",
+        }
+    }
+
+    /// Reads an `[env]` table, refusing unknown types (listing the valid ones) and unknown keys.
+    pub fn from_toml(value: toml::Value) -> Result<Self> {
+        let ty = value.get("type").and_then(|t| t.as_str()).map(str::to_owned);
+        match ty {
+            None => Err(EnvError::Parse(format!("no `type`; valid types: {}", NAMES.join(", ")))),
+            Some(t) if !NAMES.contains(&t.as_str()) => Err(EnvError::UnknownType(t)),
+            Some(_) => value.try_into().map_err(|e: toml::de::Error| EnvError::Parse(e.to_string())),
+        }
+    }
+}
+
+/// Builds the env a config describes with `env_count` worlds, seeded by `seed`.
+pub fn build(cfg: &EnvConfig, env_count: usize, seed: u64) -> Result<Box<dyn Env>> {
+    Ok(match cfg {
+        EnvConfig::PointMass(c) => Box::new(PointMass::new(c, env_count, seed)?),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknown_type_lists_valid_ones() {
+        let v: toml::Value = toml::from_str("type = \"pointmass\"").unwrap();
+        let e = EnvConfig::from_toml(v).unwrap_err().to_string();
+        assert!(e.contains("pointmass") && e.contains("point_mass"), "{e}");
+    }
+
+    #[test]
+    fn unknown_key_is_named() {
+        let v: toml::Value = toml::from_str("type = \"point_mass\"\ngoal_radiu = 0.1").unwrap();
+        let e = EnvConfig::from_toml(v).unwrap_err().to_string();
+        assert!(e.contains("goal_radiu") && e.contains("goal_radius"), "{e}");
+    }
+
+    #[test]
+    fn builds_with_defaults() {
+        let v: toml::Value = toml::from_str("type = \"point_mass\"\ndt = 0.02").unwrap();
+        let cfg = EnvConfig::from_toml(v).unwrap();
+        let env = build(&cfg, 16, 1).unwrap();
+        assert_eq!(env.spec().env_count, 16);
+        assert_eq!(env.spec().observation_dim(), 4);
+    }
+}

@@ -1,0 +1,62 @@
+//! `factory-eval --policy FILE [--episodes 1024] [--envs 128] [--config FILE] [--seed S] [--json]`: runs an
+//! exported policy deterministically and reports the columns of the paper's Tables IV and X-XII (success
+//! rate, mean env steps to success). The env is rebuilt from the policy file's own env config, or from
+//! `--config`'s `[env]` (refused, showing both specs, if it does not match what the policy was trained on).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use factory_rl::checkpoint::PolicyFile;
+use factory_rl::eval::evaluate;
+use factory_rl::TrainConfig;
+
+#[derive(Parser, Debug)]
+#[command(name = "factory-eval", about = "Evaluate an exported factory-rs policy")]
+struct Args {
+    /// The policy file (policy.json in a run folder).
+    #[arg(long)]
+    policy: PathBuf,
+    /// Episodes to evaluate.
+    #[arg(long, default_value_t = 1024)]
+    episodes: usize,
+    /// Worlds stepped together.
+    #[arg(long, default_value_t = 128)]
+    envs: usize,
+    /// Take the env from this training config instead of the policy file.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Seed of the env's draws.
+    #[arg(long, default_value_t = 12345)]
+    seed: u64,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+fn main() -> Result<()> {
+    let args = Args::parse();
+    let policy = PolicyFile::load(&args.policy)?;
+    let env_cfg = match &args.config {
+        Some(c) => TrainConfig::load(c, &[])?.env,
+        None => policy.env_config.clone(),
+    };
+    let mut env = factory_envs::build(&env_cfg, args.envs, args.seed).context("building the env")?;
+    policy.check_spec(env.spec(), &args.policy)?;
+    let device = burn::tensor::Device::flex();
+    let (model, norm) = policy.build(&device, &args.policy)?;
+    let report = evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, args.episodes, &device);
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!(
+            "{}: {} episodes, success {:.1}%, mean steps to success {:.1}, mean return {:.3}",
+            policy.env,
+            report.episodes,
+            100.0 * report.success_rate,
+            report.mean_steps_to_success,
+            report.mean_return
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,76 @@
+//! Evaluating an exported policy: deterministic actions (the Gaussian's mean). Each world contributes the
+//! same number of consecutive episodes (`episodes / env_count`, the remainder spread over the first worlds),
+//! so short episodes (often the successful ones) are not over-counted as they would be by taking the first
+//! `episodes` to end.
+
+use burn::prelude::*;
+use factory_envs::{Env, StepBuffers};
+
+use crate::model::{to_vec, ActorCritic};
+use crate::normalizer::RunningMeanStd;
+
+/// The columns of the paper's Tables IV and X-XII that an env reports.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct EvalReport {
+    /// Episodes evaluated.
+    pub episodes: usize,
+    /// Fraction that ended in success.
+    pub success_rate: f64,
+    /// Mean env steps of the successful episodes (NaN when none succeeded).
+    pub mean_steps_to_success: f64,
+    /// Mean undiscounted return.
+    pub mean_return: f64,
+}
+
+/// Runs `env` with the deterministic policy until every world has ended its quota of episodes.
+pub fn evaluate(
+    env: &mut dyn Env,
+    model: &ActorCritic,
+    norm: Option<&RunningMeanStd>,
+    clip: f32,
+    episodes: usize,
+    device: &Device,
+) -> EvalReport {
+    let spec = env.spec().clone();
+    let (n, d) = (spec.env_count, spec.observation_dim());
+    let mut buf = StepBuffers::new(&spec);
+    env.reset(&mut buf);
+    let mut ret = vec![0.0f64; n];
+    let mut len = vec![0u32; n];
+    let quota: Vec<usize> = (0..n).map(|w| episodes / n + (w < episodes % n) as usize).collect();
+    let mut ended = vec![0usize; n];
+    let (mut done, mut succ, mut steps_succ, mut ret_sum) = (0usize, 0usize, 0u64, 0.0f64);
+    while done < episodes {
+        let o = Tensor::<1>::from_floats(buf.observation.as_slice(), device).reshape([n, d]);
+        let o = match norm {
+            Some(nm) => nm.normalize(o, Some(clip)),
+            None => o,
+        };
+        let (mu, _) = model.forward(o);
+        let action = to_vec(mu.clamp(-1.0, 1.0));
+        env.step(&action, &mut buf);
+        for w in 0..n {
+            ret[w] += buf.reward[w] as f64;
+            len[w] += 1;
+            if buf.done(w) {
+                if ended[w] < quota[w] {
+                    ended[w] += 1;
+                    done += 1;
+                    ret_sum += ret[w];
+                    if buf.success[w] != 0.0 {
+                        succ += 1;
+                        steps_succ += len[w] as u64;
+                    }
+                }
+                ret[w] = 0.0;
+                len[w] = 0;
+            }
+        }
+    }
+    EvalReport {
+        episodes: done,
+        success_rate: succ as f64 / done as f64,
+        mean_steps_to_success: if succ > 0 { steps_succ as f64 / succ as f64 } else { f64::NAN },
+        mean_return: ret_sum / done as f64,
+    }
+}

@@ -1,0 +1,16 @@
+//! factory-rl: PPO for factory-rs envs in burn 0.22 (the paper's Table IX), checkpoints and policy export,
+//! and the `factory-train` / `factory-eval` binaries.
+
+pub mod config;
+pub mod error;
+pub mod model;
+pub mod normalizer;
+pub mod ppo;
+
+pub use config::{DeviceChoice, PpoConfig, TrainConfig};
+pub use error::{Result, RlError};
+pub use ppo::{EpisodeTracker, Ppo, UpdateStats};
+pub mod checkpoint;
+pub mod eval;
+pub mod run_dir;
+pub mod train;

@@ -1,0 +1,373 @@
+//! Proximal policy optimisation (Schulman et al. 2017) as the paper trains Factory's policies (Table IX,
+//! rl_games' `a2c_continuous`): clipped surrogate, clipped value loss weighted `0.5 * critic_coef`, bounds
+//! loss on the action means, GAE (Schulman et al. 2016) with value bootstrap on truncation, running
+//! observation and value normalisation, advantage normalisation over the rollout, Adam with a fixed rate.
+//!
+//! Data flow: the env writes one flat observation buffer per step; it becomes one tensor (one bulk copy), the
+//! policy runs on the learner's device, the sampled actions come back in one copy for the env. Everything
+//! else (the rollout buffer, GAE, losses) stays in tensors on the learner's device; the host reads back only
+//! the per-update logging summary. Exploration noise and minibatch order come from the learner's own seeded
+//! generator (drawn on the host and uploaded), so a run is reproducible and a resumed run continues exactly.
+
+use burn::grad_clipping::GradientClippingConfig;
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::prelude::*;
+use factory_engine::rng::SplitMix64;
+use factory_envs::{Env, StepBuffers};
+
+use crate::config::PpoConfig;
+use crate::model::{to_vec, ActorCritic};
+use crate::normalizer::RunningMeanStd;
+
+const LN_2PI: f32 = 1.837_877_1;
+/// rl_games' soft bound on action means for the bounds loss.
+const SOFT_BOUND: f32 = 1.1;
+
+/// Standard normal draws (Box-Muller on SplitMix64).
+pub fn normal(rng: &mut SplitMix64, n: usize) -> Vec<f32> {
+    let mut out = Vec::with_capacity(n + 1);
+    while out.len() < n {
+        let u1 = ((rng.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+        let u2 = (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+        let r = (-2.0 * u1.ln()).sqrt();
+        let t = std::f64::consts::TAU * u2;
+        out.push((r * t.cos()) as f32);
+        out.push((r * t.sin()) as f32);
+    }
+    out.truncate(n);
+    out
+}
+
+/// Episode bookkeeping on the host (the env is stepped from the host, so its flags are already here).
+#[derive(Clone, Debug, Default)]
+pub struct EpisodeTracker {
+    /// Undiscounted return of each world's running episode.
+    pub running_return: Vec<f32>,
+    /// Steps of each world's running episode.
+    pub running_length: Vec<u32>,
+    /// Episodes finished since the last [`take`](Self::take): (return, length, success).
+    pub finished: Vec<(f32, u32, bool)>,
+}
+
+impl EpisodeTracker {
+    /// For `env_count` worlds.
+    pub fn new(env_count: usize) -> Self {
+        Self { running_return: vec![0.0; env_count], running_length: vec![0; env_count], finished: Vec::new() }
+    }
+
+    /// Records one step's results.
+    pub fn record(&mut self, buf: &StepBuffers) {
+        for w in 0..self.running_return.len() {
+            self.running_return[w] += buf.reward[w];
+            self.running_length[w] += 1;
+            if buf.done(w) {
+                self.finished.push((self.running_return[w], self.running_length[w], buf.success[w] != 0.0));
+                self.running_return[w] = 0.0;
+                self.running_length[w] = 0;
+            }
+        }
+    }
+
+    /// The episodes finished since the last call.
+    pub fn take(&mut self) -> Vec<(f32, u32, bool)> {
+        std::mem::take(&mut self.finished)
+    }
+}
+
+/// One rollout on the learner's device: `horizon` steps of `env_count` worlds.
+pub struct Rollout {
+    /// Normalised observations as the policy saw them, [T, N, obs_dim].
+    pub obs: Tensor<3>,
+    /// Sampled (unclipped) actions, [T, N, action_dim].
+    pub action: Tensor<3>,
+    /// Log-probabilities of the actions, [T, N].
+    pub logp: Tensor<2>,
+    /// Value estimates in return units, [T, N].
+    pub value: Tensor<2>,
+    /// Rewards, [T, N].
+    pub reward: Tensor<2>,
+    /// Terminated flags, [T, N].
+    pub terminated: Tensor<2>,
+    /// Truncated flags, [T, N].
+    pub truncated: Tensor<2>,
+    /// Value of the observation after the last step, in return units, [N].
+    pub last_value: Tensor<1>,
+}
+
+/// What one update reports (read back once per update).
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+pub struct UpdateStats {
+    /// Mean clipped-surrogate loss over the update's minibatches.
+    pub actor_loss: f32,
+    /// Mean value loss (normalised units).
+    pub critic_loss: f32,
+    /// Mean bounds loss.
+    pub bounds_loss: f32,
+    /// Mean reward per step in the rollout.
+    pub mean_reward: f32,
+    /// Mean policy standard deviation.
+    pub sigma: f32,
+}
+
+/// The learner: network, optimizer, normalisers and generator.
+pub struct Ppo {
+    /// Hyperparameters.
+    pub cfg: PpoConfig,
+    /// Device for data (no autodiff).
+    pub device: Device,
+    /// The same device with autodiff, where the network trains.
+    pub train_device: Device,
+    /// The network (on `train_device`).
+    pub model: ActorCritic,
+    /// Adam.
+    pub optim: ModuleOptimizer,
+    /// Observation statistics.
+    pub obs_norm: RunningMeanStd,
+    /// Return statistics (value normalisation).
+    pub value_norm: RunningMeanStd,
+    /// Noise and minibatch order.
+    pub rng: SplitMix64,
+    /// Worlds per rollout.
+    pub env_count: usize,
+    /// Observation entries.
+    pub obs_dim: usize,
+    /// Action entries.
+    pub action_dim: usize,
+}
+
+impl Ppo {
+    /// A fresh learner for an env of this shape; `seed` draws the weights and the noise.
+    pub fn new(
+        cfg: &PpoConfig,
+        env_count: usize,
+        obs_dim: usize,
+        action_dim: usize,
+        seed: u64,
+        device: Device,
+    ) -> Self {
+        let train_device = device.clone().autodiff();
+        let mut rng = SplitMix64(seed ^ 0x5EED_0F_9A0);
+        let model = ActorCritic::new(obs_dim, action_dim, &cfg.hidden, cfg.init_log_std, &mut rng, &train_device);
+        let mut adam = AdamConfig::new().with_epsilon(1e-8);
+        if cfg.max_grad_norm > 0.0 {
+            adam = adam.with_grad_clipping(Some(GradientClippingConfig::Norm(cfg.max_grad_norm)));
+        }
+        Self {
+            cfg: cfg.clone(),
+            obs_norm: RunningMeanStd::new(obs_dim, &device),
+            value_norm: RunningMeanStd::new(1, &device),
+            device,
+            train_device,
+            model,
+            optim: adam.init(),
+            rng,
+            env_count,
+            obs_dim,
+            action_dim,
+        }
+    }
+
+    fn normalize_obs(&self, obs: Tensor<2>) -> Tensor<2> {
+        if self.cfg.normalize_observation {
+            self.obs_norm.normalize(obs, Some(self.cfg.observation_clip))
+        } else {
+            obs
+        }
+    }
+
+    fn value_to_returns(&self, v: Tensor<1>) -> Tensor<1> {
+        if self.cfg.normalize_value {
+            self.value_norm.denormalize_1d(v)
+        } else {
+            v
+        }
+    }
+
+    /// The deterministic action (the mean, clipped to [-1, 1]) for raw observations on the host; for
+    /// evaluation.
+    pub fn act_deterministic(&self, model: &ActorCritic, obs: &[f32]) -> Vec<f32> {
+        let n = obs.len() / self.obs_dim;
+        let o = Tensor::<1>::from_floats(obs, &self.device).reshape([n, self.obs_dim]);
+        let (mu, _) = model.forward(self.normalize_obs(o));
+        to_vec(mu.clamp(-1.0, 1.0))
+    }
+
+    /// Steps `env` for `horizon` steps from the observations in `buf` (which it leaves holding the last),
+    /// recording episodes in `episodes`.
+    pub fn collect(&mut self, env: &mut dyn Env, buf: &mut StepBuffers, episodes: &mut EpisodeTracker) -> Rollout {
+        let (n, a_dim, t_len) = (self.env_count, self.action_dim, self.cfg.horizon);
+        let policy = self.model.valid();
+        let log_std = policy.log_std.val();
+        let std = log_std.clone().exp().unsqueeze_dim::<2>(0);
+        let logp_const = -log_std.sum().into_scalar::<f32>() - 0.5 * a_dim as f32 * LN_2PI;
+        let (mut obs_s, mut raw_s, mut act_s, mut logp_s, mut val_s, mut rew_s, mut term_s, mut trunc_s) =
+            (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
+        let flags = |v: &[f32], dev: &Device| Tensor::<1>::from_floats(v, dev);
+        for _ in 0..t_len {
+            let raw = Tensor::<1>::from_floats(buf.observation.as_slice(), &self.device).reshape([n, self.obs_dim]);
+            let obs = self.normalize_obs(raw.clone());
+            let (mu, v) = policy.forward(obs.clone());
+            let eps =
+                Tensor::<1>::from_floats(normal(&mut self.rng, n * a_dim).as_slice(), &self.device).reshape([n, a_dim]);
+            let action = mu + eps.clone() * std.clone();
+            let logp = eps.powi_scalar(2).sum_dim(1).flatten::<1>(0, 1).mul_scalar(-0.5).add_scalar(logp_const);
+            // The one readback per step on a host env: the actions it must apply.
+            let action_host = to_vec(action.clone());
+            env.step(&action_host, buf);
+            episodes.record(buf);
+            obs_s.push(obs);
+            raw_s.push(raw);
+            act_s.push(action);
+            logp_s.push(logp);
+            val_s.push(self.value_to_returns(v));
+            rew_s.push(flags(&buf.reward, &self.device));
+            term_s.push(flags(&buf.terminated, &self.device));
+            trunc_s.push(flags(&buf.truncated, &self.device));
+        }
+        let raw_last = Tensor::<1>::from_floats(buf.observation.as_slice(), &self.device).reshape([n, self.obs_dim]);
+        let (_, v_last) = policy.forward(self.normalize_obs(raw_last));
+        let last_value = self.value_to_returns(v_last);
+        if self.cfg.normalize_observation {
+            // After the rollout, so the stored observations and log-probabilities stay consistent.
+            self.obs_norm.update(Tensor::cat(raw_s, 0));
+        }
+        Rollout {
+            obs: Tensor::stack(obs_s, 0),
+            action: Tensor::stack(act_s, 0),
+            logp: Tensor::stack(logp_s, 0),
+            value: Tensor::stack(val_s, 0),
+            reward: Tensor::stack(rew_s, 0),
+            terminated: Tensor::stack(term_s, 0),
+            truncated: Tensor::stack(trunc_s, 0),
+            last_value,
+        }
+    }
+
+    /// Generalised advantage estimates [T, N] (tensor ops, backward over time).
+    pub fn gae(&self, r: &Rollout) -> Tensor<2> {
+        let [t_len, n] = r.reward.dims();
+        let (gamma, lambda) = (self.cfg.gamma, self.cfg.gae_lambda);
+        let mut reward = r.reward.clone();
+        if self.cfg.value_bootstrap {
+            // rl_games: a truncated step's reward gets gamma V(s_t), the value of the state it was taken in.
+            reward = reward + r.value.clone().mul_scalar(gamma) * r.truncated.clone();
+        }
+        let not_done = (r.terminated.clone() + r.truncated.clone()).clamp(0.0, 1.0).neg().add_scalar(1.0);
+        let row = |x: &Tensor<2>, t: usize| x.clone().slice([t..t + 1, 0..n]).flatten::<1>(0, 1);
+        let mut adv_next = Tensor::<1>::zeros([n], &self.device);
+        let mut out = vec![adv_next.clone(); t_len];
+        for t in (0..t_len).rev() {
+            let next_v = if t + 1 == t_len { r.last_value.clone() } else { row(&r.value, t + 1) };
+            let nd = row(&not_done, t);
+            let delta = row(&reward, t) + next_v.mul_scalar(gamma) * nd.clone() - row(&r.value, t);
+            adv_next = delta + adv_next * nd.mul_scalar(gamma * lambda);
+            out[t] = adv_next.clone();
+        }
+        Tensor::stack(out, 0)
+    }
+
+    /// One PPO update on `rollout`: `epochs` passes of shuffled minibatches.
+    pub fn update(&mut self, rollout: Rollout) -> UpdateStats {
+        let [t_len, n] = rollout.reward.dims();
+        let batch = t_len * n;
+        let adv = self.gae(&rollout).reshape([batch]);
+        let values = rollout.value.clone().reshape([batch]);
+        let returns = adv.clone() + values.clone();
+        let (old_v, ret) = if self.cfg.normalize_value {
+            self.value_norm.update(returns.clone().reshape([batch, 1]));
+            (self.value_norm.normalize_1d(values), self.value_norm.normalize_1d(returns))
+        } else {
+            (values, returns)
+        };
+        let adv = if self.cfg.normalize_advantage {
+            let mean = adv.clone().mean();
+            let centred = adv - mean;
+            let std = centred.clone().powi_scalar(2).mean().sqrt().add_scalar(1e-8);
+            centred / std
+        } else {
+            adv
+        };
+        let obs = rollout.obs.reshape([batch, self.obs_dim]);
+        let act = rollout.action.reshape([batch, self.action_dim]);
+        let logp_old = rollout.logp.reshape([batch]);
+        let mean_reward = rollout.reward.mean();
+
+        let mb = self.cfg.minibatch_size;
+        let c = self.cfg.clone();
+        let clip = c.clip_ratio;
+        let mut sums: Vec<Tensor<1>> = Vec::new();
+        let mut steps = 0usize;
+        for _ in 0..c.epochs {
+            let perm = self.permutation(batch);
+            for chunk in perm.chunks_exact(mb) {
+                let idx = Tensor::<1, Int>::from_ints(chunk, &self.device);
+                let o = obs.clone().select(0, idx.clone());
+                let a = act.clone().select(0, idx.clone());
+                let lp_old = logp_old.clone().select(0, idx.clone());
+                let ad = adv.clone().select(0, idx.clone());
+                let v_old = old_v.clone().select(0, idx.clone());
+                let r = ret.clone().select(0, idx);
+
+                let (mu, v) = self.model.forward(o);
+                let log_std = self.model.log_std.val();
+                let z = (a - mu.clone()) / log_std.clone().exp().unsqueeze_dim(0);
+                let logp = z.powi_scalar(2).sum_dim(1).flatten::<1>(0, 1).mul_scalar(-0.5)
+                    - log_std.clone().sum()
+                    - 0.5 * self.action_dim as f32 * LN_2PI;
+                let ratio = (logp - lp_old).exp();
+                let surr = (ratio.clone() * ad.clone()).min_pair(ratio.clamp(1.0 - clip, 1.0 + clip) * ad);
+                let actor_loss = surr.mean().neg();
+                let v_err = (v.clone() - r.clone()).powi_scalar(2);
+                let critic_loss = if c.clip_value {
+                    let v_clipped = v_old.clone() + (v - v_old).clamp(-clip, clip);
+                    v_err.max_pair((v_clipped - r).powi_scalar(2)).mean()
+                } else {
+                    v_err.mean()
+                };
+                let high = (mu.clone() - SOFT_BOUND).clamp_min(0.0).powi_scalar(2);
+                let low = (mu + SOFT_BOUND).clamp_max(0.0).powi_scalar(2);
+                let bounds_loss = (high + low).sum_dim(1).mean();
+                let mut loss = actor_loss.clone()
+                    + critic_loss.clone().mul_scalar(0.5 * c.critic_coef)
+                    + bounds_loss.clone().mul_scalar(c.bounds_loss_coef);
+                if c.entropy_coef > 0.0 {
+                    // A Gaussian's entropy: sum(log sigma) + d/2 ln(2 pi e).
+                    let entropy = log_std.sum().add_scalar(0.5 * self.action_dim as f32 * (LN_2PI + 1.0));
+                    loss = loss - entropy.mul_scalar(c.entropy_coef);
+                }
+                let grads = GradientsParams::from_grads(loss.backward(), &self.model);
+                let model = self.model.clone();
+                self.model = self.optim.step(c.learning_rate, model, grads);
+                sums.push(Tensor::cat(
+                    vec![actor_loss.without_autodiff(), critic_loss.without_autodiff(), bounds_loss.without_autodiff()],
+                    0,
+                ));
+                steps += 1;
+            }
+        }
+        // The logging summary: the one readback of the update.
+        let sigma = self.model.log_std.val().without_autodiff().exp().mean();
+        let summary = to_vec(Tensor::cat(
+            vec![Tensor::stack::<2>(sums, 0).mean_dim(0).flatten::<1>(0, 1), mean_reward, sigma],
+            0,
+        ));
+        let _ = steps;
+        UpdateStats {
+            actor_loss: summary[0],
+            critic_loss: summary[1],
+            bounds_loss: summary[2],
+            mean_reward: summary[3],
+            sigma: summary[4],
+        }
+    }
+
+    /// A Fisher-Yates permutation of 0..n from the learner's generator.
+    fn permutation(&mut self, n: usize) -> Vec<i32> {
+        let mut p: Vec<i32> = (0..n as i32).collect();
+        for i in (1..n).rev() {
+            let j = (self.rng.next_u64() % (i as u64 + 1)) as usize;
+            p.swap(i, j);
+        }
+        p
+    }
+}

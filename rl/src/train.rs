@@ -1,0 +1,168 @@
+//! The training loop shared by `factory-train` and the tests: env + learner + counters, one PPO update per
+//! call, checkpoints that resume exactly, and policy export.
+
+use std::path::Path;
+use std::time::Instant;
+
+use burn::prelude::*;
+use factory_envs::{Env, StepBuffers};
+
+use crate::checkpoint::{self, PolicyFile};
+use crate::config::{DeviceChoice, TrainConfig};
+use crate::error::{Result, RlError};
+use crate::ppo::{EpisodeTracker, Ppo, UpdateStats};
+
+/// The learner's device for a config choice, and a name for logs.
+///
+/// `cpu` and `auto` are burn-flex on the host: on this project's 2-core machines flex trains the Table IX MLP
+/// about 3x faster than burn-wgpu over lavapipe (DESIGN.md). `wgpu` (burn's wgpu backend sharing the
+/// engine's device) is not in this build yet: burn's wgpu backend roughly doubles a clean build, and it
+/// comes with the device-resident rollout; asking for it is refused by name.
+pub fn resolve_device(choice: DeviceChoice) -> Result<(Device, &'static str)> {
+    match choice {
+        DeviceChoice::Cpu => Ok((Device::flex(), "cpu (burn-flex)")),
+        DeviceChoice::Auto => Ok((Device::flex(), "cpu (burn-flex; auto)")),
+        DeviceChoice::Wgpu => Err(RlError::InvalidValue {
+            field: "ppo.device".into(),
+            reason: "\"wgpu\" is not built in this version of factory-rl; valid: \"auto\", \"cpu\"".into(),
+        }),
+    }
+}
+
+/// What one update reports.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct UpdateReport {
+    /// Updates completed, this one included.
+    pub update: usize,
+    /// Env steps so far (all worlds).
+    pub env_steps: u64,
+    /// The learner's losses.
+    pub stats: UpdateStats,
+    /// Episodes that ended during this update's rollout.
+    pub episodes: usize,
+    /// Their success rate (NaN when none ended).
+    pub success_rate: f32,
+    /// Their mean undiscounted return (NaN when none ended).
+    pub mean_return: f32,
+    /// Wall time of the rollout (simulation and acting) [s].
+    pub rollout_seconds: f64,
+    /// Wall time of the PPO update [s].
+    pub learn_seconds: f64,
+}
+
+/// An env and a learner stepping together.
+pub struct Trainer {
+    /// The resolved config.
+    pub cfg: TrainConfig,
+    /// The env.
+    pub env: Box<dyn Env>,
+    /// The learner.
+    pub ppo: Ppo,
+    /// The env's last outputs (the next rollout starts from its observations).
+    pub buf: StepBuffers,
+    /// Episode bookkeeping.
+    pub episodes: EpisodeTracker,
+    /// Updates completed.
+    pub updates_done: usize,
+    /// Env steps taken.
+    pub env_steps: u64,
+    /// Training wall time so far, across resumes [s].
+    pub wall_seconds: f64,
+}
+
+impl Trainer {
+    /// A fresh run.
+    pub fn new(cfg: TrainConfig, device: Device) -> Result<Self> {
+        let mut env = factory_envs::build(&cfg.env, cfg.train.env_count, cfg.seed)?;
+        let spec = env.spec().clone();
+        let mut buf = StepBuffers::new(&spec);
+        env.reset(&mut buf);
+        let ppo = Ppo::new(&cfg.ppo, spec.env_count, spec.observation_dim(), spec.action_dim(), cfg.seed, device);
+        Ok(Self {
+            episodes: EpisodeTracker::new(spec.env_count),
+            cfg,
+            env,
+            ppo,
+            buf,
+            updates_done: 0,
+            env_steps: 0,
+            wall_seconds: 0.0,
+        })
+    }
+
+    /// Continues the run saved in checkpoint `path` (its own config; `device` may differ).
+    pub fn resume(path: &Path, device: Device) -> Result<Self> {
+        let ck = checkpoint::read(path)?;
+        let cfg = TrainConfig::from_str_with(&ck.meta.config, &path.display().to_string(), &[])?;
+        let mut t = Self::new(cfg, device)?;
+        checkpoint::restore(&mut t.ppo, &ck, path)?;
+        let bad = |reason: String| RlError::BadFile { path: path.into(), reason };
+        if ck.meta.observation.len() != t.buf.observation.len() {
+            return Err(bad(format!(
+                "observation of length {}, the env has {}",
+                ck.meta.observation.len(),
+                t.buf.observation.len()
+            )));
+        }
+        match &ck.env_state {
+            Some(state) => {
+                t.env.load_state(state)?;
+                t.buf.observation.copy_from_slice(&ck.meta.observation);
+                t.episodes.running_return = ck.meta.running_return.clone();
+                t.episodes.running_length = ck.meta.running_length.clone();
+            }
+            // The env cannot restore its worlds: they start fresh episodes (already reset by `new`).
+            None => {}
+        }
+        t.updates_done = ck.meta.updates_done;
+        t.env_steps = ck.meta.env_steps;
+        t.wall_seconds = ck.meta.wall_seconds;
+        Ok(t)
+    }
+
+    /// One rollout and one PPO update.
+    pub fn update(&mut self) -> UpdateReport {
+        let t0 = Instant::now();
+        let rollout = self.ppo.collect(self.env.as_mut(), &mut self.buf, &mut self.episodes);
+        let t1 = Instant::now();
+        let stats = self.ppo.update(rollout);
+        let t2 = Instant::now();
+        self.updates_done += 1;
+        self.env_steps += (self.cfg.ppo.horizon * self.cfg.train.env_count) as u64;
+        self.wall_seconds += (t2 - t0).as_secs_f64();
+        let finished = self.episodes.take();
+        let k = finished.len();
+        let (ret, succ) = finished.iter().fold((0.0f64, 0usize), |(r, s), e| (r + e.0 as f64, s + e.2 as usize));
+        UpdateReport {
+            update: self.updates_done,
+            env_steps: self.env_steps,
+            stats,
+            episodes: k,
+            success_rate: if k > 0 { succ as f32 / k as f32 } else { f32::NAN },
+            mean_return: if k > 0 { (ret / k as f64) as f32 } else { f32::NAN },
+            rollout_seconds: (t1 - t0).as_secs_f64(),
+            learn_seconds: (t2 - t1).as_secs_f64(),
+        }
+    }
+
+    /// Writes a checkpoint atomically.
+    pub fn save_checkpoint(&self, path: &Path) -> Result<()> {
+        checkpoint::save(
+            path,
+            &self.ppo,
+            &self.cfg.to_toml(),
+            self.updates_done,
+            self.env_steps,
+            self.wall_seconds,
+            &self.buf.observation,
+            &self.episodes,
+            self.env.save_state(),
+        )
+    }
+
+    /// Exports the policy.
+    pub fn export_policy(&self, path: &Path) -> Result<()> {
+        PolicyFile::from_learner(&self.ppo, self.env.spec(), &self.cfg.env, self.updates_done, self.env_steps)
+            .save(path)
+    }
+}
