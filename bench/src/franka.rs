@@ -3,11 +3,9 @@
 //! table and screws it down to the head, scripted (no policy), with the nut's start position and yaw drawn
 //! per world.
 //!
-//! Scene (z up, the table's surface at z = 0, the robot's base at x = -0.5 m as Factory's franka_depth):
-//! the Franka ([`FRANKA_URDF`], armature 0.01), its finger pads (boxes) the only links that touch
-//! anything; the nut a dynamic body (the generated ISO M16 nut, steel); the bolt static at the origin, its
-//! thread the exact analytic field (nut triangles queried against it); the table a half-space. Pads and
-//! table see the nut through its convex hull (a hexagonal prism: the flats the fingers grip are exact).
+//! The scene is the one the Franka envs use (`factory_envs::franka::scene`): the Franka, its box finger
+//! pads, the generated M16 nut, the bolt's exact thread field and the table; here the nut starts on the
+//! table.
 //!
 //! Script, per world (each stage ends on its condition, checked every frame):
 //! 1. above the nut: the fingertip 8 cm over the nut, the hand pointing down with its finger axis along
@@ -29,29 +27,21 @@
 //! down a nut pressed on the bolt's tip until they let go of it (docs/BENCHMARKS.md).
 
 use anyhow::{ensure, Context, Result};
-use factory_assets::{nut_bolt, Fit, IsoSize, NutBolt, ThreadOptions};
+use factory_assets::NutBolt;
 use factory_controllers::{build, ArmBatch, Controller, ControllerConfig, Targets};
 use factory_engine::articulation::sim::ArticulatedSim;
 use factory_engine::articulation::{ArticulationControl, ArticulationModel, ArticulationState, Frame};
-use factory_engine::builder::ModelBuilder;
-use factory_engine::contact::roles::ShapeGeometry;
-use factory_engine::contact::{ContactConfig, PairSpec, QueryShape, SdfShape, TransformGpu, NO_BODY};
+use factory_engine::contact::ContactConfig;
 use factory_engine::gpu::GpuContext;
 use factory_engine::rng::SplitMix64;
-use factory_engine::sdf::cache::SdfCache;
-use factory_engine::solver::{BodyState, Control, SolverConfig};
+use factory_engine::solver::{Control, SolverConfig};
 use factory_engine::urdf::load_urdf;
+use factory_envs::franka::scene::{NutBoltScene, SceneConfig};
 use glam::{Quat, Vec3};
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Instant;
 
-/// The project's Franka description.
-pub const FRANKA_URDF: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/franka/franka_panda.urdf");
-/// Factory's Screw reset pose (IsaacGymEnvs): the hand points down over the bolt.
-pub const Q_START: [f32; 9] = [1.5178e-3, -0.19651, -1.4364e-3, -1.9761, -2.7717e-4, 1.7796, 0.78556, 0.04, 0.04];
-/// Robot base position [m] (Factory: franka_depth 0.5 m from the table's centre).
-pub const BASE: Vec3 = Vec3::new(-0.5, 0.0, 0.0);
+pub use factory_envs::franka::scene::{BASE, FRANKA_URDF, Q_START};
 /// Largest speed of a moving target [m/s] and yaw rate [rad/s] in the motion stages.
 pub const TARGET_SPEED: f32 = 0.25;
 pub const TARGET_YAW_RATE: f32 = 2.0;
@@ -188,10 +178,6 @@ pub struct FrankaNutBolt {
     pub freeze_at: Option<Stage>,
 }
 
-fn steel_nut(size: IsoSize, segments_per_turn: usize) -> Result<NutBolt> {
-    Ok(nut_bolt(size, Fit::Loose, &ThreadOptions { segments_per_turn, ..Default::default() })?)
-}
-
 /// Yaw of the finger axis (the hand's y) about world z for a fingertip orientation `q`.
 fn finger_yaw(q: Quat) -> f32 {
     let y = q * Vec3::Y;
@@ -202,78 +188,35 @@ impl FrankaNutBolt {
     /// Builds `run.worlds` worlds with the nut placed on the table at a seeded position and yaw.
     pub fn new(gpu: &GpuContext, run: &FrankaNutBoltRun) -> Result<Self> {
         ensure!(run.worlds > 0, "--worlds must be at least 1");
-        let urdf = load_urdf(&PathBuf::from(FRANKA_URDF))?;
-        let mut art = ArticulationModel::from_urdf(&urdf, (BASE, Quat::IDENTITY), Vec3::new(0.0, 0.0, -9.81))?;
-        // IsaacGymEnvs' Factory: armature 0.01 on every Franka joint.
-        art.set_armature(0.01);
-        // The gripper PD as an implicit joint drive (as explicit torques such gains are unstable on a 15 g
-        // finger at Factory's time step): 2000 N/m squeezes the 24 mm nut with 24 N per finger (the Franka
-        // Hand holds 70 N continuously), enough to turn it in the thread without slipping in the hand.
-        for d in 7..9 {
-            art.dof_drive_stiffness[d] = 2000.0;
-            art.dof_drive_damping[d] = 50.0;
-        }
-        // A little joint damping (the real arm's joint friction) keeps the null space of the six-axis
-        // task still and damps the screw stage's free axes.
-        for d in 0..7 {
-            art.dof_damping[d] = 0.1;
-        }
-        let tip = art.frame("panda_fingertip_centered").context("the Franka has no fingertip frame")?;
-        let nb = steel_nut(IsoSize::M16, run.segments_per_turn)?;
-        let mut b = ModelBuilder::new(art.gravity);
-        // Factory: nut friction 0.3, Franka 1.0, table 0.3 (pairs take the mean).
-        let nut = b.add_dynamic_body(&nb.nut.mass_properties);
-        let nut_shape = b.add_shape(
-            Some(nut),
-            (Vec3::ZERO, Quat::IDENTITY),
-            ShapeGeometry::Mesh { mesh: Arc::new(nb.nut.mesh.clone()), sdf_resolution: None },
-        );
-        b.shape_mut(nut_shape).friction = 0.3;
-        let table = b.add_shape(None, (Vec3::ZERO, Quat::IDENTITY), ShapeGeometry::Plane);
-        b.shape_mut(table).friction = 0.3;
-        let (_, left) = b.add_urdf_link(&urdf, &art, "panda_leftfinger", 1.0, 0.005)?;
-        let (_, right) = b.add_urdf_link(&urdf, &art, "panda_rightfinger", 1.0, 0.005)?;
-        b.filter_pair(left[0], right[0]);
-        // The pads are wider than the nut's flats (17.5 vs 13.9 mm): queried at a 4 x 4 grid per face, as
-        // Factory subdivides its finger mesh, they hold the flat at several points, not at a face
-        // triangle's one deepest point (which let the nut turn in the hand).
-        for pad in [left[0], right[0]] {
-            if let ShapeGeometry::Box { half_extents } = b.shape_mut(pad).geometry {
-                b.shape_mut(pad).geometry = ShapeGeometry::GridBox { half_extents, points_per_edge: 4 };
-            }
-        }
-        b.replicate(run.worlds);
-        let mut model = b.build(&SdfCache::new(SdfCache::default_dir()))?;
-        // The thread: the nut's triangles against the bolt's exact field, the bolt fixed at the origin.
-        model.contacts.pairs.push(PairSpec {
-            body_a: nut.0,
-            a_pose: (Vec3::ZERO, Quat::IDENTITY),
-            query: Arc::new(QueryShape::mesh(&nb.nut.mesh)),
-            body_b: NO_BODY,
-            b_pose: (Vec3::ZERO, Quat::IDENTITY),
-            sdf: SdfShape::Thread(nb.bolt_sdf()),
-            contact_offset: 0.002,
-            friction: run.thread_mu,
-        });
-        let nb_count = model.bodies.body_count();
         let worlds = run.worlds as usize;
         let mut rng = SplitMix64(run.seed);
-        let mut body_q = vec![TransformGpu::new(Vec3::ZERO, Quat::IDENTITY); worlds * nb_count];
-        let head = nb.dims.head_height as f32;
         let mut grip_yaws = Vec::with_capacity(worlds);
-        for w in 0..worlds {
-            // Factory's Pick draws the nut within +-0.1 m of its spot; here within +-5 cm of (0, -0.2) and any
-            // yaw, the reach kept inside the arm's comfortable workspace.
-            let xy = Vec3::new(0.1 * (rng.unit() - 0.5), -0.2 + 0.1 * (rng.unit() - 0.5), 0.0);
-            let yaw = std::f32::consts::FRAC_PI_3 * rng.unit();
-            // The nut mesh's frame is the assembly's: its bottom sits at the head height.
-            body_q[w * nb_count + nut.0 as usize] = TransformGpu::new(xy - Vec3::Z * head, Quat::from_rotation_z(yaw));
-            grip_yaws.push(yaw);
-        }
-        let state = BodyState { body_q, body_qd: vec![[Vec3::ZERO; 2]; worlds * nb_count] };
-        let joints = ArticulationState::replicate(&Q_START, worlds);
+        let scene_cfg = SceneConfig {
+            worlds: run.worlds,
+            solver: run.solver.clone(),
+            contact: run.contact.clone(),
+            segments_per_turn: run.segments_per_turn,
+            thread_mu: run.thread_mu,
+            // A little joint damping (the real arm's joint friction) keeps the null space of the six-axis
+            // task still and damps the screw stage's free axes.
+            arm_damping: 0.1,
+        };
+        let scene = NutBoltScene::build(
+            gpu,
+            &scene_cfg,
+            |nb, _| {
+                // Factory's Pick draws the nut within +-0.1 m of its spot; here within +-5 cm of (0, -0.2)
+                // and any yaw, the reach kept inside the arm's comfortable workspace.
+                let xy = Vec3::new(0.1 * (rng.unit() - 0.5), -0.2 + 0.1 * (rng.unit() - 0.5), 0.0);
+                let yaw = std::f32::consts::FRAC_PI_3 * rng.unit();
+                grip_yaws.push(yaw);
+                // The nut mesh's frame is the assembly's: its bottom sits at the head height.
+                (xy - Vec3::Z * nb.dims.head_height as f32, Quat::from_rotation_z(yaw))
+            },
+            ArticulationState::replicate(&Q_START, worlds),
+        )?;
+        let NutBoltScene { sim, nb, tip, nut, .. } = scene;
         let nut_triangles = nb.nut.mesh.triangle_count();
-        let sim = ArticulatedSim::new(gpu, model, art, run.solver.clone(), &run.contact, state, joints)?;
         let arm = ArmBatch::from_articulation(&sim.articulation, &sim.joints, &tip, 7, &[]);
         let down = Quat::from_rotation_z(-finger_yaw(arm.ee_quat[0])) * arm.ee_quat[0];
         // Six-axis OSC in every stage. Factory's Screw controller (OSC on z and yaw only) left x, y, roll and
@@ -293,7 +236,7 @@ impl FrankaNutBolt {
                 done_at: None,
             })
             .collect();
-        Ok(FrankaNutBolt { sim, nb, tip, nut: nut.0 as usize, motion, down, scripts, nut_triangles, freeze_at: None })
+        Ok(FrankaNutBolt { sim, nb, tip, nut, motion, down, scripts, nut_triangles, freeze_at: None })
     }
 
     /// The stage world `w` is in.

@@ -78,6 +78,16 @@ impl StepBuffers {
     }
 }
 
+/// Measurements of the last step per world, for evaluation (the paper's joint-torque column in Tables IV and
+/// X-XII, and the contact forces of its Fig. S17). Taken before the step's resets.
+#[derive(Clone, Debug, Default)]
+pub struct StepDiagnostics {
+    /// Norm of the commanded arm joint torques [N m], shape [env_count].
+    pub joint_torque_norm: Vec<f32>,
+    /// Contact-force norms [N] by name (`left_finger`, `bolt`, ...), each of shape [env_count].
+    pub contact_force_norms: Vec<(String, Vec<f32>)>,
+}
+
 /// A batch of `env_count` worlds stepped together.
 ///
 /// Implementations write into the caller's [`StepBuffers`] (sized by [`StepBuffers::new`]); stepping does not
@@ -92,6 +102,11 @@ pub trait Env: Send {
     /// Applies `action` (shape [env_count * action_dim], clipped to [-1, 1]) for one control step, writes the
     /// step's results and resets the worlds whose episode ended (see the module docs).
     fn step(&mut self, action: &[f32], out: &mut StepBuffers);
+
+    /// Hook: the last step's measurements (None, the default, when the env has none).
+    fn diagnostics(&self) -> Option<StepDiagnostics> {
+        None
+    }
 
     /// Hook: the env's whole state (worlds, episode counters, generator) as bytes, so a checkpoint can resume
     /// exactly; `None` (the default) when the env cannot, and a resumed run then starts fresh episodes.

@@ -19,6 +19,15 @@ pub enum EnvError {
     /// The TOML could not be read into an env config (syntax error, unknown key, wrong value type).
     #[error("invalid env config: {0}")]
     Parse(String),
+    /// The engine refused the scene (URDF, SDF, GPU, solver settings).
+    #[error(transparent)]
+    Engine(#[from] factory_engine::EngineError),
+    /// The controller config was refused.
+    #[error("[env.controller]: {0}")]
+    Controller(#[from] factory_controllers::ControllerError),
+    /// Building the scene failed for another reason (named).
+    #[error("building the scene: {0}")]
+    Build(String),
     /// A buffer handed to the env has the wrong length.
     #[error("`{field}` has length {len}, expected {expected}")]
     Shape {

@@ -4,10 +4,12 @@
 
 pub mod env;
 pub mod error;
+pub mod franka;
 pub mod point_mass;
 pub mod registry;
 
-pub use env::{Env, EnvSpec, StepBuffers};
+pub use env::{Env, EnvSpec, StepBuffers, StepDiagnostics};
 pub use error::{EnvError, Result};
+pub use franka::nut_bolt::{FrankaNutBolt, FrankaNutBoltConfig};
 pub use point_mass::{PointMass, PointMassConfig};
 pub use registry::{build, EnvConfig, NAMES};

@@ -10,10 +10,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::env::Env;
 use crate::error::{EnvError, Result};
+use crate::franka::nut_bolt::{FrankaNutBolt, FrankaNutBoltConfig};
 use crate::point_mass::{PointMass, PointMassConfig};
 
 /// The registered envs' `type` names.
-pub const NAMES: &[&str] = &["point_mass"];
+pub const NAMES: &[&str] = &["point_mass", "franka_nut_bolt"];
 
 /// An env config: the `[env]` table, selected by its `type` key.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -21,6 +22,8 @@ pub const NAMES: &[&str] = &["point_mass"];
 pub enum EnvConfig {
     /// [`PointMass`].
     PointMass(PointMassConfig),
+    /// [`FrankaNutBolt`] (Factory's nut-and-bolt tasks).
+    FrankaNutBolt(FrankaNutBoltConfig),
 }
 
 impl EnvConfig {
@@ -28,6 +31,7 @@ impl EnvConfig {
     pub fn name(&self) -> &'static str {
         match self {
             EnvConfig::PointMass(_) => "point_mass",
+            EnvConfig::FrankaNutBolt(_) => "franka_nut_bolt",
         }
     }
 
@@ -46,6 +50,7 @@ impl EnvConfig {
 pub fn build(cfg: &EnvConfig, env_count: usize, seed: u64) -> Result<Box<dyn Env>> {
     Ok(match cfg {
         EnvConfig::PointMass(c) => Box::new(PointMass::new(c, env_count, seed)?),
+        EnvConfig::FrankaNutBolt(c) => Box::new(FrankaNutBolt::new(c, env_count, seed)?),
     })
 }
 

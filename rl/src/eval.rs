@@ -20,6 +20,30 @@ pub struct EvalReport {
     pub mean_steps_to_success: f64,
     /// Mean undiscounted return.
     pub mean_return: f64,
+    /// Mean norm of the commanded arm joint torques over every step of every world [N m] (NaN when the env
+    /// does not measure it).
+    pub mean_joint_torque_norm: f64,
+}
+
+/// World 0's contact-force norms at every evaluation step (the data of the paper's Fig. S17).
+#[derive(Clone, Debug, Default)]
+pub struct ForceTrace {
+    /// Column names after `step` (`left_finger`, `right_finger`, `bolt`, `nut`, ...).
+    pub names: Vec<String>,
+    /// One row per step: the norms [N] in `names`' order.
+    pub rows: Vec<Vec<f32>>,
+}
+
+impl ForceTrace {
+    /// The trace as CSV (`step,name,...`).
+    pub fn to_csv(&self) -> String {
+        let mut s = format!("step,{}\n", self.names.join(","));
+        for (i, r) in self.rows.iter().enumerate() {
+            let cols: Vec<String> = r.iter().map(|x| x.to_string()).collect();
+            s.push_str(&format!("{i},{}\n", cols.join(",")));
+        }
+        s
+    }
 }
 
 /// Runs `env` with the deterministic policy until every world has ended its quota of episodes.
@@ -30,6 +54,7 @@ pub fn evaluate(
     clip: f32,
     episodes: usize,
     device: &Device,
+    mut forces: Option<&mut ForceTrace>,
 ) -> EvalReport {
     let spec = env.spec().clone();
     let (n, d) = (spec.env_count, spec.observation_dim());
@@ -40,6 +65,7 @@ pub fn evaluate(
     let quota: Vec<usize> = (0..n).map(|w| episodes / n + (w < episodes % n) as usize).collect();
     let mut ended = vec![0usize; n];
     let (mut done, mut succ, mut steps_succ, mut ret_sum) = (0usize, 0usize, 0u64, 0.0f64);
+    let (mut torque_sum, mut torque_count) = (0.0f64, 0u64);
     while done < episodes {
         let o = Tensor::<1>::from_floats(buf.observation.as_slice(), device).reshape([n, d]);
         let o = match norm {
@@ -49,6 +75,16 @@ pub fn evaluate(
         let (mu, _) = model.forward(o);
         let action = to_vec(mu.clamp(-1.0, 1.0));
         env.step(&action, &mut buf);
+        if let Some(d) = env.diagnostics() {
+            torque_sum += d.joint_torque_norm.iter().map(|&t| t as f64).sum::<f64>();
+            torque_count += d.joint_torque_norm.len() as u64;
+            if let Some(trace) = forces.as_deref_mut() {
+                if trace.names.is_empty() {
+                    trace.names = d.contact_force_norms.iter().map(|(n, _)| n.clone()).collect();
+                }
+                trace.rows.push(d.contact_force_norms.iter().map(|(_, v)| v[0]).collect());
+            }
+        }
         for w in 0..n {
             ret[w] += buf.reward[w] as f64;
             len[w] += 1;
@@ -72,5 +108,6 @@ pub fn evaluate(
         success_rate: succ as f64 / done as f64,
         mean_steps_to_success: if succ > 0 { steps_succ as f64 / succ as f64 } else { f64::NAN },
         mean_return: ret_sum / done as f64,
+        mean_joint_torque_norm: if torque_count > 0 { torque_sum / torque_count as f64 } else { f64::NAN },
     }
 }

@@ -31,7 +31,7 @@ fn ppo_learns_point_mass_reaching() {
         let (model, norm) = p.build(&Device::flex(), &path).unwrap();
         let mut env = factory_envs::build(&p.env_config, 128, 999).unwrap();
         std::fs::remove_dir_all(&dir).ok();
-        evaluate(env.as_mut(), &model, norm.as_ref(), p.observation_clip, 1024, &Device::flex())
+        evaluate(env.as_mut(), &model, norm.as_ref(), p.observation_clip, 1024, &Device::flex(), None)
     };
     assert!(untrained.success_rate < 0.3, "the untrained policy already succeeds: {untrained:?}");
     let mut last = None;
@@ -49,7 +49,7 @@ fn ppo_learns_point_mass_reaching() {
     let (model, norm) = policy.build(&device, &policy_path).unwrap();
     let mut env = factory_envs::build(&policy.env_config, 128, 999).unwrap();
     policy.check_spec(env.spec(), &policy_path).unwrap();
-    let report = evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, 1024, &device);
+    let report = evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, 1024, &device, None);
     eprintln!("untrained: {untrained:?}");
     eprintln!(
         "after {updates} updates ({} env steps): training success {:.3}, eval {report:?}",

@@ -292,6 +292,92 @@ impl WarmStart {
         })
     }
 
+    /// The rows' state as bytes (what the next frame's match and warm start read; the per-substep caches
+    /// are rebuilt), for checkpoints that must continue exactly.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b = Vec::new();
+        let mut put = |x: u32| b.extend_from_slice(&x.to_le_bytes());
+        put(self.rows.len() as u32);
+        for rows in &self.rows {
+            put(rows.len() as u32);
+            for r in rows {
+                for i in [r.a, r.b, r.pair, r.patch] {
+                    put(i as u32);
+                }
+                let n = r.normal.unwrap_or(Vec3::ZERO);
+                let floats = [
+                    r.anchor_a.x,
+                    r.anchor_a.y,
+                    r.anchor_a.z,
+                    r.mu,
+                    r.lambda_n,
+                    r.lambda_t[0],
+                    r.lambda_t[1],
+                    n.x,
+                    n.y,
+                    n.z,
+                    r.sep,
+                    r.point_b.x,
+                    r.point_b.y,
+                    r.point_b.z,
+                ];
+                put(r.normal.is_some() as u32);
+                for f in floats {
+                    put(f.to_bits());
+                }
+            }
+        }
+        b
+    }
+
+    /// Reads what [`to_bytes`](Self::to_bytes) wrote; None if the bytes are not such a state.
+    pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
+        let mut at = 0usize;
+        let mut word = || -> Option<u32> {
+            let w = u32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?);
+            at += 4;
+            Some(w)
+        };
+        let worlds = word()? as usize;
+        let mut out = Vec::with_capacity(worlds.min(1 << 20));
+        for _ in 0..worlds {
+            let n = word()? as usize;
+            let mut rows = Vec::with_capacity(n.min(1 << 20));
+            for _ in 0..n {
+                let (a, b, pair, patch) = (word()? as usize, word()? as usize, word()? as usize, word()? as usize);
+                let has_normal = word()? != 0;
+                let mut f = [0.0f32; 14];
+                for x in &mut f {
+                    *x = f32::from_bits(word()?);
+                }
+                rows.push(Row {
+                    a,
+                    b,
+                    pair,
+                    patch,
+                    anchor_a: Vec3::new(f[0], f[1], f[2]),
+                    mu: f[3],
+                    lambda_n: f[4],
+                    lambda_t: [f[5], f[6]],
+                    normal: has_normal.then(|| Vec3::new(f[7], f[8], f[9])),
+                    sep: f[10],
+                    point_b: Vec3::new(f[11], f[12], f[13]),
+                    cache: None,
+                });
+            }
+            out.push(rows);
+        }
+        (at == bytes.len()).then_some(WarmStart { rows: out })
+    }
+
+    /// Forgets world `world`'s rows, so its next frame starts cold (after the world was reset: last
+    /// frame's impulses belong to contacts that no longer exist).
+    pub fn clear_world(&mut self, world: usize) {
+        if let Some(rows) = self.rows.get_mut(world) {
+            rows.clear();
+        }
+    }
+
     /// Renumbers the pairs of last frame's rows (`map`: old pair index -> new, None: the pair is gone and
     /// its rows are dropped), for callers whose pair list changes from frame to frame (crate::crowd).
     pub fn remap_pairs(&mut self, map: impl Fn(usize) -> Option<usize>) {
@@ -807,4 +893,42 @@ fn solve_row(
 /// Converts a host pose to the kernels' transform (re-exported for callers building states).
 pub fn transform(p: Vec3, q: Quat) -> TransformGpu {
     TransformGpu::new(p, q)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(i: usize, normal: Option<Vec3>) -> Row {
+        let f = i as f32;
+        Row {
+            a: i,
+            b: i + 1,
+            pair: 2 * i,
+            patch: 3 * i,
+            anchor_a: Vec3::new(f, -f, 0.5 * f),
+            mu: 0.3,
+            lambda_n: 1e-3 * f,
+            lambda_t: [-2e-4 * f, 7e-5],
+            normal,
+            sep: -1e-4 * f,
+            point_b: Vec3::new(0.1, f, -f),
+            cache: None,
+        }
+    }
+
+    #[test]
+    fn warm_start_bytes_round_trip() {
+        let warm =
+            WarmStart { rows: vec![vec![row(1, Some(Vec3::Z)), row(2, None)], vec![], vec![row(3, Some(-Vec3::X))]] };
+        let bytes = warm.to_bytes();
+        let back = WarmStart::from_bytes(&bytes).expect("round trip");
+        assert_eq!(back.to_bytes(), bytes);
+        assert_eq!(back.rows.len(), 3);
+        assert_eq!(back.rows[0][1].normal, None);
+        assert_eq!(back.rows[2][0].normal, Some(-Vec3::X));
+        assert_eq!(back.pair_impulse(0, 2), warm.pair_impulse(0, 2));
+        assert!(WarmStart::from_bytes(&bytes[..bytes.len() - 1]).is_none());
+        assert!(WarmStart::from_bytes(&[bytes.as_slice(), &[0u8; 4]].concat()).is_none());
+    }
 }

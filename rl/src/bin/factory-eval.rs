@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Parser;
 use factory_rl::checkpoint::PolicyFile;
-use factory_rl::eval::evaluate;
+use factory_rl::eval::{evaluate, ForceTrace};
 use factory_rl::TrainConfig;
 
 #[derive(Parser, Debug)]
@@ -29,6 +29,9 @@ struct Args {
     /// Seed of the env's draws.
     #[arg(long, default_value_t = 12345)]
     seed: u64,
+    /// Write world 0's per-step contact-force norms at the fingers, nut and bolt (CSV; envs that measure them).
+    #[arg(long, value_name = "FILE")]
+    forces_csv: Option<PathBuf>,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -45,17 +48,31 @@ fn main() -> Result<()> {
     policy.check_spec(env.spec(), &args.policy)?;
     let device = burn::tensor::Device::flex();
     let (model, norm) = policy.build(&device, &args.policy)?;
-    let report = evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, args.episodes, &device);
+    let mut trace = ForceTrace::default();
+    let report = evaluate(
+        env.as_mut(),
+        &model,
+        norm.as_ref(),
+        policy.observation_clip,
+        args.episodes,
+        &device,
+        args.forces_csv.as_ref().map(|_| &mut trace),
+    );
+    if let Some(path) = &args.forces_csv {
+        factory_rl::checkpoint::write_atomic(path, trace.to_csv().as_bytes())?;
+    }
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         println!(
-            "{}: {} episodes, success {:.1}%, mean steps to success {:.1}, mean return {:.3}",
+            "{}: {} episodes, success {:.1}%, mean steps to success {:.1}, mean return {:.3}, mean joint torque \
+             norm {:.2} N m",
             policy.env,
             report.episodes,
             100.0 * report.success_rate,
             report.mean_steps_to_success,
-            report.mean_return
+            report.mean_return,
+            report.mean_joint_torque_norm
         );
     }
     Ok(())

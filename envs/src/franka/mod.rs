@@ -1,0 +1,5 @@
+//! Franka environments: the shared nut-and-bolt scene ([`scene`]) and the FrankaNutBolt env with its task
+//! plugins ([`nut_bolt`]; today the Screw task).
+
+pub mod nut_bolt;
+pub mod scene;
