@@ -41,7 +41,19 @@ impl EnvConfig {
         match ty {
             None => Err(EnvError::Parse(format!("no `type`; valid types: {}", NAMES.join(", ")))),
             Some(t) if !NAMES.contains(&t.as_str()) => Err(EnvError::UnknownType(t)),
-            Some(_) => value.try_into().map_err(|e: toml::de::Error| EnvError::Parse(e.to_string())),
+            Some(t) => value.clone().try_into().map_err(|e: toml::de::Error| {
+                // The tagged enum's error does not say which key; parsing the variant's own table as text
+                // does (with the line and the key).
+                let mut table = value.as_table().cloned().unwrap_or_default();
+                table.remove("type");
+                let text = toml::to_string(&table).unwrap_or_default();
+                let detail = match t.as_str() {
+                    "point_mass" => toml::from_str::<PointMassConfig>(&text).err(),
+                    "franka_nut_bolt" => toml::from_str::<FrankaNutBoltConfig>(&text).err(),
+                    _ => None,
+                };
+                EnvError::Parse(detail.map_or_else(|| e.to_string(), |d| d.to_string()))
+            }),
         }
     }
 }
@@ -70,6 +82,13 @@ mod tests {
         let v: toml::Value = toml::from_str("type = \"point_mass\"\ngoal_radiu = 0.1").unwrap();
         let e = EnvConfig::from_toml(v).unwrap_err().to_string();
         assert!(e.contains("goal_radiu") && e.contains("goal_radius"), "{e}");
+    }
+
+    #[test]
+    fn wrong_type_names_the_key() {
+        let v: toml::Value = toml::from_str("type = \"point_mass\"\ndt = \"fast\"").unwrap();
+        let e = EnvConfig::from_toml(v).unwrap_err().to_string();
+        assert!(e.contains("dt") && e.contains("f32"), "{e}");
     }
 
     #[test]
