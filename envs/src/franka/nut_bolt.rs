@@ -76,12 +76,21 @@ pub struct FrankaNutBoltConfig {
     pub unidirectional_rot: bool,
     /// The controller (`type` = one of the seven; Factory's Screw: operational-space motion on z and yaw).
     pub controller: ControllerConfig,
-    /// Arm joint damping [N m s/rad] (IsaacGymEnvs' Franka URDF: 10 on joints 1-6).
+    /// Arm joint damping [N m s/rad]. IsaacGymEnvs' Franka URDF says 10 on joints 1-6, but its Factory tasks
+    /// drive the arm in effort mode, where (as we read Isaac Gym) joint drive damping does not act. At 10 the
+    /// OSC's yaw (kp 200) turned the hand at about 0.1 rad/s: 12 turns of the M16 would take over 10 minutes,
+    /// longer than an episode. Default 0.1, as the scripted scene.
     pub arm_damping: f32,
     /// Friction of the thread.
     pub thread_mu: f32,
     /// Thread columns per turn of the generated nut mesh.
     pub segments_per_turn: usize,
+    /// Start the nut on the bolt's first full thread (engaged, up to one pitch below the tip; the default)
+    /// instead of resting on the tip (IsaacGymEnvs). Resting on the tip, nothing holds the hand sideways
+    /// (Factory's Screw controller acts on z and yaw only) and it drifted off the bolt (measured: 4.7 mm in
+    /// 5 s with zero actions at damping 0.1); engaged, the thread holds the nut and the hand stayed within
+    /// 0.3 mm.
+    pub start_engaged: bool,
     /// Nut centre-of-mass distance from its target that ends the episode as a failure [m].
     pub far_error: f32,
     /// Append the finger pads' contact forces on the nut [N] (6) to the observation.
@@ -113,10 +122,11 @@ impl Default for FrankaNutBoltConfig {
                  gripper_kp = 100\ngripper_kd = 1",
             )
             .expect("Factory's Screw controller config is valid"),
-            arm_damping: 10.0,
+            arm_damping: 0.1,
             thread_mu: 0.3,
             segments_per_turn: 48,
             far_error: 0.1,
+            start_engaged: true,
             observe_finger_force: false,
             observe_previous_action: false,
         }
@@ -328,8 +338,12 @@ impl FrankaNutBolt {
         let controller = build(&cfg.controller, DOF, ARM_DOF)?;
         let d = scene.nb.dims;
         let (head, shank, nut_h) = (d.head_height as f32, d.shank_length as f32, d.nut_height as f32);
-        // The nut on the bolt's tip, flats normal to x (the fingers close along x at yaw 0).
-        let reset_nut = (Vec3::Z * shank, Quat::IDENTITY);
+        // The nut on the bolt's first full thread: the highest whole number of pitches above its seat that
+        // is not above the tip (the thread maps onto itself under a one-pitch translation, so the nut fits
+        // there at yaw 0, flats normal to x: the fingers close along x at yaw 0).
+        let pitch = scene.nb.pitch;
+        let start_z = if cfg.start_engaged { (shank / pitch + 1e-4).floor() * pitch } else { shank };
+        let reset_nut = (Vec3::Z * start_z, Quat::IDENTITY);
         // Factory's Screw pose, its fingertip moved onto the nut by IK: pointing down (Q_START's orientation
         // without its yaw), fingers just open around the flats.
         let arm0 = ArmBatch::from_articulation(
@@ -345,7 +359,7 @@ impl FrankaNutBolt {
         let half_width = 0.5 * d.width_across_flats as f32;
         q[ARM_DOF] = half_width + 2e-4;
         q[ARM_DOF + 1] = half_width + 2e-4;
-        let reset_q = inverse_kinematics(&scene, &q, Vec3::new(0.0, 0.0, head + shank + GRASP_HEIGHT), down);
+        let reset_q = inverse_kinematics(&scene, &q, Vec3::new(0.0, 0.0, head + start_z + GRASP_HEIGHT), down);
         let com_local = scene.nb.nut.mass_properties.com;
         // The task registry: one entry per `task` name.
         let task: Box<dyn NutBoltTask> = match cfg.task {
