@@ -24,6 +24,7 @@ use factory_controllers::{build, linalg, ArmBatch, Controller, ControllerConfig,
 use factory_engine::articulation::{ArticulationControl, ArticulationState};
 use factory_engine::contact::ContactConfig;
 use factory_engine::gpu::GpuContext;
+use factory_engine::rng::SplitMix64;
 use factory_engine::solver::{Control, SolverConfig};
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
@@ -46,6 +47,28 @@ pub const GRASP_HEIGHT: f32 = 0.002;
 pub enum TaskName {
     /// Screw the nut from the bolt's tip down to the head.
     Screw,
+}
+
+/// Reset randomisation of the Screw task, each value drawn uniformly from `[lo, hi]` per episode. The default
+/// draws nothing (IsaacGymEnvs' Screw); the paper's Table III ranges are in each field's doc.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ScrewRandomization {
+    /// Hand and nut turned together about the bolt's axis [deg] (Table III "hand angle": [-90, 90]); the nut
+    /// stays on the thread (its height follows the helix, one pitch per turn).
+    pub hand_angle_deg: [f32; 2],
+    /// Fingertip offset from the nut's grasp point [mm], in the nut's frame after the turn: x along the
+    /// fingers' closing axis (each finger closes to its flat), y along the flats, z up (Table III:
+    /// [-3, 3], [-3, 3], [0, 3]). An x offset grips the nut off-centre, and the two finger drives (both
+    /// pulling to 0, as Factory's) then squeeze it unequally: a world drawn with 0.3 mm lost the nut within
+    /// 21 steps of zero actions (measured). Keep x at [0, 0] until the gripper balances its fingers.
+    pub fingertip_offset_mm: [[f32; 2]; 3],
+}
+
+impl Default for ScrewRandomization {
+    fn default() -> Self {
+        Self { hand_angle_deg: [0.0; 2], fingertip_offset_mm: [[0.0; 2]; 3] }
+    }
 }
 
 /// `[env] type = "franka_nut_bolt"`. Defaults are IsaacGymEnvs' FactoryTaskNutBoltScrew where it has one.
@@ -93,6 +116,8 @@ pub struct FrankaNutBoltConfig {
     pub start_engaged: bool,
     /// Nut centre-of-mass distance from its target that ends the episode as a failure [m].
     pub far_error: f32,
+    /// Reset randomisation (`[env.randomize]`).
+    pub randomize: ScrewRandomization,
     /// Append the finger pads' contact forces on the nut [N] (6) to the observation.
     pub observe_finger_force: bool,
     /// Append the previous action (12) to the observation.
@@ -126,6 +151,7 @@ impl Default for FrankaNutBoltConfig {
             thread_mu: 0.3,
             segments_per_turn: 48,
             far_error: 0.1,
+            randomize: ScrewRandomization::default(),
             start_engaged: true,
             observe_finger_force: false,
             observe_previous_action: false,
@@ -147,6 +173,15 @@ impl FrankaNutBoltConfig {
         {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(field, format!("{v} is not a finite number >= 0"));
+            }
+        }
+        let r = &self.randomize;
+        let ranges = [("randomize.hand_angle_deg", r.hand_angle_deg, 180.0)]
+            .into_iter()
+            .chain(r.fingertip_offset_mm.iter().map(|&x| ("randomize.fingertip_offset_mm", x, 5.0)));
+        for (field, [lo, hi], limit) in ranges {
+            if !(lo.is_finite() && hi.is_finite() && lo <= hi && lo >= -limit && hi <= limit) {
+                return bad(field, format!("[{lo}, {hi}] must be a range lo <= hi within [-{limit}, {limit}]"));
             }
         }
         if self.segments_per_turn < 8 {
@@ -266,10 +301,15 @@ pub struct FrankaNutBolt {
     task: Box<dyn NutBoltTask>,
     /// The nut's centre of mass in its frame [m].
     com_local: Vec3,
-    /// Joint positions every episode starts from (Factory's Screw pose, fingertip put on the nut by IK).
+    /// Joint positions an unrandomised episode starts from (Factory's Screw pose, fingertip put on the nut by
+    /// IK).
     reset_q: [f32; DOF],
-    /// The nut's frame pose every episode starts from (on the bolt's tip).
+    /// The nut's frame pose an unrandomised episode starts from.
     reset_nut: (Vec3, Quat),
+    /// The fingertip's orientation at yaw 0 (pointing down, fingers closing along x).
+    down: Quat,
+    /// Draws of the reset randomisation.
+    rng: SplitMix64,
     /// Pad-nut contact pairs (for the finger-force observation) and whether the nut is their query side.
     pad_pairs: Vec<(usize, bool)>,
     /// Control steps of each world's episode, shape [env_count].
@@ -309,8 +349,8 @@ fn inverse_kinematics(scene: &NutBoltScene, q0: &[f32; DOF], pos: Vec3, quat: Qu
 }
 
 impl FrankaNutBolt {
-    /// `env_count` worlds; Screw has no reset randomisation (as Factory), so `seed` is unused today.
-    pub fn new(cfg: &FrankaNutBoltConfig, env_count: usize, _seed: u64) -> Result<Self> {
+    /// `env_count` worlds; `seed` draws the reset randomisation.
+    pub fn new(cfg: &FrankaNutBoltConfig, env_count: usize, seed: u64) -> Result<Self> {
         cfg.check()?;
         let gpu = GpuContext::global()?;
         let solver = SolverConfig {
@@ -439,6 +479,8 @@ impl FrankaNutBolt {
             com_local,
             reset_q,
             reset_nut,
+            down,
+            rng: SplitMix64(seed),
             pad_pairs,
             world_steps: vec![0; env_count],
             world_prev_action: vec![0.0; env_count * 12],
@@ -500,6 +542,34 @@ impl FrankaNutBolt {
         }
     }
 
+    /// Resets world `w` to a new episode's start, drawing the randomisation.
+    fn reset_world(&mut self, w: usize) {
+        let r = self.cfg.randomize.clone();
+        let mut draw = |[lo, hi]: [f32; 2]| if hi > lo { lo + (hi - lo) * self.rng.unit() } else { lo };
+        let angle = draw(r.hand_angle_deg).to_radians();
+        let o = Vec3::new(
+            draw(r.fingertip_offset_mm[0]),
+            draw(r.fingertip_offset_mm[1]),
+            draw(r.fingertip_offset_mm[2]),
+        ) * 1e-3;
+        if angle == 0.0 && o == Vec3::ZERO {
+            self.scene.reset_world(w, self.reset_nut, &self.reset_q);
+            return;
+        }
+        let turn = Quat::from_rotation_z(angle);
+        // On the helix: turning counterclockwise by `angle` raises a right-hand nut by pitch * angle / 2 pi.
+        let nut_p = self.reset_nut.0 + Vec3::Z * (self.scene.nb.pitch * angle / std::f32::consts::TAU);
+        let head = self.scene.nb.dims.head_height as f32;
+        let grasp = Vec3::new(0.0, 0.0, head + nut_p.z + GRASP_HEIGHT);
+        let tip = grasp + turn * Vec3::new(o.x, o.y, 0.0) + Vec3::Z * o.z;
+        let mut q = inverse_kinematics(&self.scene, &self.reset_q, tip, turn * self.down);
+        // The fingers close along the nut's x: the left one (+y of the hand) to the flat at -o.x + w/2.
+        let half_width = 0.5 * self.scene.nb.dims.width_across_flats as f32;
+        q[ARM_DOF] = half_width - o.x + 2e-4;
+        q[ARM_DOF + 1] = half_width + o.x + 2e-4;
+        self.scene.reset_world(w, (nut_p, turn * self.reset_nut.1), &q);
+    }
+
     /// Records the step's torque norms and contact forces (before any reset clears a world's warm start).
     fn measure(&mut self, joint_tau: &[f32]) {
         let n = self.spec.env_count;
@@ -556,7 +626,7 @@ impl Env for FrankaNutBolt {
 
     fn reset(&mut self, out: &mut StepBuffers) {
         for w in 0..self.spec.env_count {
-            self.scene.reset_world(w, self.reset_nut, &self.reset_q);
+            self.reset_world(w);
             self.world_steps[w] = 0;
         }
         self.world_prev_action.fill(0.0);
@@ -576,7 +646,7 @@ impl Env for FrankaNutBolt {
     fn save_state(&self) -> Option<Vec<u8>> {
         let sim = &self.scene.sim;
         let qd: Vec<f32> = sim.state.body_qd.iter().flat_map(|[v, w]| [v.x, v.y, v.z, w.x, w.y, w.z]).collect();
-        let sections: [Vec<u8>; 7] = [
+        let sections: [Vec<u8>; 8] = [
             bytemuck::cast_slice(&sim.state.body_q).to_vec(),
             bytemuck::cast_slice(&qd).to_vec(),
             bytemuck::cast_slice(&sim.joints.joint_q).to_vec(),
@@ -584,6 +654,7 @@ impl Env for FrankaNutBolt {
             bytemuck::cast_slice(&self.world_steps).to_vec(),
             bytemuck::cast_slice(&self.world_prev_action).to_vec(),
             sim.warm.to_bytes(),
+            self.rng.0.to_le_bytes().to_vec(),
         ];
         let mut b = Vec::new();
         for s in sections {
@@ -598,7 +669,7 @@ impl Env for FrankaNutBolt {
             |reason: &str| EnvError::InvalidValue { field: "state", reason: format!("franka_nut_bolt: {reason}") };
         let mut at = 0usize;
         let mut sections = Vec::new();
-        for _ in 0..7 {
+        for _ in 0..8 {
             let len = bytes.get(at..at + 8).ok_or_else(|| bad("truncated"))?;
             let len = u64::from_le_bytes(len.try_into().unwrap()) as usize;
             at += 8;
@@ -616,7 +687,7 @@ impl Env for FrankaNutBolt {
             self.world_steps.len() * 4,
             self.world_prev_action.len() * 4,
         ];
-        if sections[..6].iter().zip(want).any(|(s, w)| s.len() != w) {
+        if sections[..6].iter().zip(want).any(|(s, w)| s.len() != w) || sections[7].len() != 8 {
             return Err(bad("saved for another number of worlds or bodies"));
         }
         let warm = factory_engine::solver::WarmStart::from_bytes(sections[6]).ok_or_else(|| bad("warm start"))?;
@@ -634,6 +705,7 @@ impl Env for FrankaNutBolt {
         self.world_steps = sections[4].chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect();
         self.world_prev_action = f32s(sections[5]);
         sim.warm = warm;
+        self.rng.0 = u64::from_le_bytes(sections[7].try_into().unwrap());
         Ok(())
     }
 
@@ -671,7 +743,7 @@ impl Env for FrankaNutBolt {
             out.truncated[w] = timed_out as u8 as f32;
             out.success[w] = (outcome == Outcome::Success) as u8 as f32;
             if outcome != Outcome::Running || timed_out {
-                self.scene.reset_world(w, self.reset_nut, &self.reset_q);
+                self.reset_world(w);
                 self.world_steps[w] = 0;
                 self.world_prev_action[w * 12..(w + 1) * 12].fill(0.0);
                 any_reset = true;
