@@ -12,5 +12,6 @@ pub use error::{Result, RlError};
 pub use ppo::{EpisodeTracker, Ppo, UpdateStats};
 pub mod checkpoint;
 pub mod eval;
+pub mod plot;
 pub mod run_dir;
 pub mod train;
