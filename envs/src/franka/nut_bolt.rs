@@ -547,11 +547,9 @@ impl FrankaNutBolt {
         let r = self.cfg.randomize.clone();
         let mut draw = |[lo, hi]: [f32; 2]| if hi > lo { lo + (hi - lo) * self.rng.unit() } else { lo };
         let angle = draw(r.hand_angle_deg).to_radians();
-        let o = Vec3::new(
-            draw(r.fingertip_offset_mm[0]),
-            draw(r.fingertip_offset_mm[1]),
-            draw(r.fingertip_offset_mm[2]),
-        ) * 1e-3;
+        let o =
+            Vec3::new(draw(r.fingertip_offset_mm[0]), draw(r.fingertip_offset_mm[1]), draw(r.fingertip_offset_mm[2]))
+                * 1e-3;
         if angle == 0.0 && o == Vec3::ZERO {
             self.scene.reset_world(w, self.reset_nut, &self.reset_q);
             return;
