@@ -116,6 +116,12 @@ pub struct FrankaNutBoltConfig {
     pub start_engaged: bool,
     /// Nut centre-of-mass distance from its target that ends the episode as a failure [m].
     pub far_error: f32,
+    /// Reward added on the step that succeeds (Factory's Screw: 0).
+    pub success_bonus: f32,
+    /// Reward subtracted on the step that fails (Factory: none). With a reward that is negative every step
+    /// and episodes that end on failure, ending early pays; a penalty of about the return of a long episode
+    /// removes that.
+    pub failure_penalty: f32,
     /// Reset randomisation (`[env.randomize]`).
     pub randomize: ScrewRandomization,
     /// Append the finger pads' contact forces on the nut [N] (6) to the observation.
@@ -151,6 +157,8 @@ impl Default for FrankaNutBoltConfig {
             thread_mu: 0.3,
             segments_per_turn: 48,
             far_error: 0.1,
+            success_bonus: 0.0,
+            failure_penalty: 0.0,
             randomize: ScrewRandomization::default(),
             start_engaged: true,
             observe_finger_force: false,
@@ -168,9 +176,13 @@ impl FrankaNutBoltConfig {
         if self.max_episode_steps == 0 {
             return bad("max_episode_steps", "must be at least 1".into());
         }
-        for (field, v) in
-            [("arm_damping", self.arm_damping), ("thread_mu", self.thread_mu), ("far_error", self.far_error)]
-        {
+        for (field, v) in [
+            ("arm_damping", self.arm_damping),
+            ("thread_mu", self.thread_mu),
+            ("far_error", self.far_error),
+            ("success_bonus", self.success_bonus),
+            ("failure_penalty", self.failure_penalty),
+        ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(field, format!("{v} is not a finite number >= 0"));
             }
@@ -734,7 +746,12 @@ impl Env for FrankaNutBolt {
         for (w, v) in views.iter().enumerate() {
             self.world_steps[w] += 1;
             let outcome = if diverged[w] { Outcome::Failure } else { self.task.outcome(v) };
-            let reward = if diverged[w] { 0.0 } else { self.task.reward(v) };
+            let reward = if diverged[w] { 0.0 } else { self.task.reward(v) }
+                + match outcome {
+                    Outcome::Success => self.cfg.success_bonus,
+                    Outcome::Failure => -self.cfg.failure_penalty,
+                    Outcome::Running => 0.0,
+                };
             let timed_out = outcome == Outcome::Running && self.world_steps[w] >= self.cfg.max_episode_steps;
             out.reward[w] = reward;
             out.terminated[w] = (outcome != Outcome::Running) as u8 as f32;
