@@ -296,7 +296,6 @@ impl Ppo {
         let c = self.cfg.clone();
         let clip = c.clip_ratio;
         let mut sums: Vec<Tensor<1>> = Vec::new();
-        let mut steps = 0usize;
         for _ in 0..c.epochs {
             let perm = self.permutation(batch);
             for chunk in perm.chunks_exact(mb) {
@@ -342,7 +341,6 @@ impl Ppo {
                     vec![actor_loss.without_autodiff(), critic_loss.without_autodiff(), bounds_loss.without_autodiff()],
                     0,
                 ));
-                steps += 1;
             }
         }
         // The logging summary: the one readback of the update.
@@ -351,7 +349,6 @@ impl Ppo {
             vec![Tensor::stack::<2>(sums, 0).mean_dim(0).flatten::<1>(0, 1), mean_reward, sigma],
             0,
         ));
-        let _ = steps;
         UpdateStats {
             actor_loss: summary[0],
             critic_loss: summary[1],

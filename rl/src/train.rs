@@ -92,8 +92,14 @@ impl Trainer {
 
     /// Continues the run saved in checkpoint `path` (its own config; `device` may differ).
     pub fn resume(path: &Path, device: Device) -> Result<Self> {
+        Self::resume_on(path, |_| Ok(device))
+    }
+
+    /// As [`resume`](Self::resume), the device chosen from the checkpoint's config (the file is read once).
+    pub fn resume_on(path: &Path, device: impl FnOnce(&TrainConfig) -> Result<Device>) -> Result<Self> {
         let ck = checkpoint::read(path)?;
         let cfg = TrainConfig::from_str_with(&ck.meta.config, &path.display().to_string(), &[])?;
+        let device = device(&cfg)?;
         let mut t = Self::new(cfg, device)?;
         checkpoint::restore(&mut t.ppo, &ck, path)?;
         let bad = |reason: String| RlError::BadFile { path: path.into(), reason };

@@ -52,10 +52,13 @@ fn main() -> Result<()> {
                 bail!("--resume continues the run with its saved config; only --updates may change");
             }
             let ck = checkpoint_path(run);
-            let cfg_probe = factory_rl::checkpoint::read(&ck).with_context(|| format!("resuming {}", run.display()))?;
-            let cfg = TrainConfig::from_str_with(&cfg_probe.meta.config, &ck.display().to_string(), &[])?;
-            let (device, name) = resolve_device(cfg.ppo.device)?;
-            let mut t = Trainer::resume(&ck, device)?;
+            let mut name = "";
+            let mut t = Trainer::resume_on(&ck, |cfg| {
+                let (device, n) = resolve_device(cfg.ppo.device)?;
+                name = n;
+                Ok(device)
+            })
+            .with_context(|| format!("resuming {}", run.display()))?;
             if let Some(u) = args.updates {
                 t.cfg.train.updates = u;
             }
