@@ -29,7 +29,7 @@ use factory_engine::solver::{Control, SolverConfig};
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
-use super::scene::{NutBoltScene, SceneConfig, ARM_DOF, DOF, Q_START};
+use super::scene::{NutBoltScene, SceneConfig, ARM_DOF, BASE, DOF, Q_START};
 use crate::env::{Env, EnvSpec, StepBuffers, StepDiagnostics};
 use crate::error::{EnvError, Result};
 
@@ -99,11 +99,14 @@ pub struct FrankaNutBoltConfig {
     pub unidirectional_rot: bool,
     /// The controller (`type` = one of the seven; Factory's Screw: operational-space motion on z and yaw).
     pub controller: ControllerConfig,
-    /// Arm joint damping [N m s/rad]. IsaacGymEnvs' Franka URDF says 10 on joints 1-6, but its Factory tasks
-    /// drive the arm in effort mode, where (as we read Isaac Gym) joint drive damping does not act. At 10 the
-    /// OSC's yaw (kp 200) turned the hand at about 0.1 rad/s: 12 turns of the M16 would take over 10 minutes,
-    /// longer than an episode. Default 0.1, as the scripted scene.
+    /// Damping of arm joints 1-6 [N m s/rad] (IsaacGymEnvs' Factory Franka URDF: 10). Factory's Screw
+    /// controller acts on z and yaw only; this damping is what keeps the other axes and the arm's null space
+    /// still while the hand turns. With 0.1 the hand rose along the nut's flats by ~9 mm in 2 s of turning and
+    /// lost it (regression test `the_hand_screws_the_nut_two_turns_without_climbing_it`).
     pub arm_damping: f32,
+    /// Damping of joint 7, the wrist that screws [N m s/rad] (the URDF: none). At 10, as the other joints,
+    /// the OSC's yaw (kp 200) turned the hand at ~0.1 rad/s, too slow to screw the nut down in an episode.
+    pub wrist_damping: f32,
     /// Friction of the thread.
     pub thread_mu: f32,
     /// Thread columns per turn of the generated nut mesh.
@@ -153,7 +156,8 @@ impl Default for FrankaNutBoltConfig {
                  gripper_kp = 100\ngripper_kd = 1",
             )
             .expect("Factory's Screw controller config is valid"),
-            arm_damping: 0.1,
+            arm_damping: 10.0,
+            wrist_damping: 0.0,
             thread_mu: 0.3,
             segments_per_turn: 48,
             far_error: 0.1,
@@ -178,6 +182,7 @@ impl FrankaNutBoltConfig {
         }
         for (field, v) in [
             ("arm_damping", self.arm_damping),
+            ("wrist_damping", self.wrist_damping),
             ("thread_mu", self.thread_mu),
             ("far_error", self.far_error),
             ("success_bonus", self.success_bonus),
@@ -379,7 +384,8 @@ impl FrankaNutBolt {
             contact: ContactConfig::default(),
             segments_per_turn: cfg.segments_per_turn,
             thread_mu: cfg.thread_mu,
-            arm_damping: cfg.arm_damping,
+            base: BASE,
+            arm_damping: std::array::from_fn(|d| if d + 1 == ARM_DOF { cfg.wrist_damping } else { cfg.arm_damping }),
         };
         let mut scene = NutBoltScene::build(
             gpu,
@@ -503,6 +509,11 @@ impl FrankaNutBolt {
     /// The scene (for tests and benchmarks).
     pub fn scene(&self) -> &NutBoltScene {
         &self.scene
+    }
+
+    /// The scene, mutable (diagnostics and scripted starts; the env's episode counters do not see changes).
+    pub fn scene_mut(&mut self) -> &mut NutBoltScene {
+        &mut self.scene
     }
 
     fn views(&self, arm: &ArmBatch) -> Vec<WorldView> {

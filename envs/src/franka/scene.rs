@@ -31,8 +31,10 @@ pub const FRANKA_URDF: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/fr
 /// Factory's Screw reset pose (IsaacGymEnvs FactoryTaskNutBoltScrew): the hand points down over the bolt;
 /// fingers open.
 pub const Q_START: [f32; 9] = [1.5178e-3, -0.19651, -1.4364e-3, -1.9761, -2.7717e-4, 1.7796, 0.78556, 0.04, 0.04];
-/// Robot base position [m] (Factory: franka_depth 0.5 m from the table's centre).
-pub const BASE: Vec3 = Vec3::new(-0.5, 0.0, 0.0);
+/// Robot base position [m]. Factory (FactoryBase.yaml, factory_env_nut_bolt.py): the Franka stands on the floor
+/// franka_depth 0.5 m behind the table's centre and the table top is table_height 0.4 m above the floor, so with
+/// the table top at z = 0 here the base is 0.4 m below it; Q_START then puts the fingertip over the bolt's tip.
+pub const BASE: Vec3 = Vec3::new(-0.5, 0.0, -0.4);
 /// Arm joints of the Franka (the other two are the fingers).
 pub const ARM_DOF: usize = 7;
 /// All joints.
@@ -51,8 +53,11 @@ pub struct SceneConfig {
     pub segments_per_turn: usize,
     /// Friction of the nut-bolt pair (Factory's nut and bolt: 0.3).
     pub thread_mu: f32,
-    /// Arm joint damping [N m s/rad] (the real arm's joint friction; IsaacGymEnvs' Franka URDF has 10).
-    pub arm_damping: f32,
+    /// The robot's base position [m] ([`BASE`] is Factory's).
+    pub base: Vec3,
+    /// Damping of each arm joint [N m s/rad] (IsaacGymEnvs' Factory Franka URDF: 10 on joints 1-6, none on
+    /// joint 7).
+    pub arm_damping: [f32; ARM_DOF],
 }
 
 /// The built scene: the simulator and what the envs need to find in it.
@@ -87,7 +92,7 @@ impl NutBoltScene {
             return Err(EnvError::InvalidValue { field: "env_count", reason: "must be at least 1".into() });
         }
         let urdf = load_urdf(&PathBuf::from(FRANKA_URDF))?;
-        let mut art = ArticulationModel::from_urdf(&urdf, (BASE, Quat::IDENTITY), Vec3::new(0.0, 0.0, -9.81))?;
+        let mut art = ArticulationModel::from_urdf(&urdf, (cfg.base, Quat::IDENTITY), Vec3::new(0.0, 0.0, -9.81))?;
         // IsaacGymEnvs' Factory: armature 0.01 on every Franka joint.
         art.set_armature(0.01);
         // The gripper PD as an implicit joint drive (as explicit torques such gains are unstable on a 15 g
@@ -97,9 +102,7 @@ impl NutBoltScene {
             art.dof_drive_stiffness[d] = 2000.0;
             art.dof_drive_damping[d] = 50.0;
         }
-        for d in 0..ARM_DOF {
-            art.dof_damping[d] = cfg.arm_damping;
-        }
+        art.dof_damping[..ARM_DOF].copy_from_slice(&cfg.arm_damping);
         let tip = art
             .frame("panda_fingertip_centered")
             .ok_or_else(|| EnvError::Build(format!("{FRANKA_URDF} has no panda_fingertip_centered frame")))?;

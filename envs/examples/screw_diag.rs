@@ -1,0 +1,62 @@
+//! One world of the Screw env under a constant yaw action; prints the fingertip, the nut and joint 7 every
+//! 10 steps until the episode ends.
+//!
+//!   cargo run --release -p factory-envs --example screw_diag -- <a_yaw> [a_z] [steps]
+
+use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let yaw: f32 = args.get(1).map(|s| s.parse().unwrap()).unwrap_or(-0.8);
+    let z: f32 = args.get(2).map(|s| s.parse().unwrap()).unwrap_or(0.0);
+    let steps: usize = args.get(3).map(|s| s.parse().unwrap()).unwrap_or(1000);
+    let mut cfg = FrankaNutBoltConfig::default();
+    if let Ok(v) = std::env::var("ARM_DAMPING") {
+        cfg.arm_damping = v.parse().unwrap();
+    }
+    if let Ok(v) = std::env::var("SUBSTEPS") {
+        cfg.substeps = v.parse().unwrap();
+    }
+    if let Ok(v) = std::env::var("POS_ITERS") {
+        cfg.pos_iters = v.parse().unwrap();
+    }
+    if let Ok(v) = std::env::var("PATCH_ITERS") {
+        cfg.link_patch_iters = v.parse().unwrap();
+    }
+    if let Ok(v) = std::env::var("WRIST_DAMPING") {
+        cfg.wrist_damping = v.parse().unwrap();
+    }
+    let mut e = FrankaNutBolt::new(&cfg, 1, 0).unwrap();
+    let mut b = StepBuffers::new(e.spec());
+    e.reset(&mut b);
+    if std::env::var("FK_START").is_ok() {
+        let s = e.scene_mut();
+        let pose = s.nut_pose(0);
+        s.reset_world(0, pose, &factory_envs::franka::scene::Q_START);
+        s.sim.sync_links();
+        let arm = s.arm();
+        println!("fingertip at Q_START: {:?} quat {:?}", arm.ee_pos[0], arm.ee_quat[0]);
+        return;
+    }
+    let mut a = [0.0f32; 12];
+    a[2] = z;
+    a[5] = yaw;
+    for t in 0..steps {
+        let prev = b.observation.clone();
+        let q = e.scene().sim.joints.joint_q.clone();
+        e.step(&a, &mut b);
+        let o = if b.done(0) { &prev } else { &b.observation };
+        if t % 10 == 0 || b.done(0) {
+            let d = ((o[0] - o[13]).powi(2) + (o[1] - o[14]).powi(2) + (o[2] - o[15]).powi(2)).sqrt();
+            println!(
+                "t {t:4} tip [{:7.4} {:7.4} {:7.4}] nut [{:7.4} {:7.4} {:7.4}] |tip-nut| {:.4} q {:?} fingers {:.4} {:.4}",
+                o[0], o[1], o[2], o[13], o[14], o[15], d,
+                q[..7].iter().map(|x| (x * 1000.0).round() / 1000.0).collect::<Vec<_>>(), q[7], q[8]
+            );
+        }
+        if b.done(0) {
+            println!("ended at step {} success {}", t + 1, b.success[0]);
+            break;
+        }
+    }
+}

@@ -1,0 +1,64 @@
+//! Constant-action sweep on the Screw env: each world holds one constant action (a yaw rate and a push along
+//! z) for a whole episode; prints how each episode ended and how far the nut went. Shows whether (and how fast)
+//! a simple open-loop policy screws the nut down under the env's physics.
+//!
+//!   cargo run --release -p factory-envs --example screw_sweep -- [steps] [substeps] [pos_iters]
+
+use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let steps: usize = args.get(1).map(|s| s.parse().unwrap()).unwrap_or(2400);
+    let mut cfg = FrankaNutBoltConfig::default();
+    if let Some(s) = args.get(2) {
+        cfg.substeps = s.parse().unwrap();
+    }
+    if let Some(s) = args.get(3) {
+        cfg.pos_iters = s.parse().unwrap();
+    }
+    // Yaw actions (unidirectional: -1 no turn, +1 the full 0.1 rad clockwise increment) x z actions.
+    let yaws = [-0.98f32, -0.95, -0.9, -0.8, -0.6, -0.2, 0.4, 1.0];
+    let zs = [0.0f32, -1.0];
+    let worlds = yaws.len() * zs.len();
+    let mut e = FrankaNutBolt::new(&cfg, worlds, 0).unwrap();
+    let mut b = StepBuffers::new(e.spec());
+    e.reset(&mut b);
+    let mut act = vec![0.0f32; worlds * 12];
+    for (i, &z) in zs.iter().enumerate() {
+        for (j, &y) in yaws.iter().enumerate() {
+            let w = i * yaws.len() + j;
+            act[w * 12 + 2] = z;
+            act[w * 12 + 5] = y;
+        }
+    }
+    let z0: Vec<f32> = (0..worlds).map(|w| e.scene().nut_pose(w).0.z).collect();
+    let mut ended: Vec<Option<(usize, bool, f32)>> = vec![None; worlds];
+    let t0 = std::time::Instant::now();
+    for t in 0..steps {
+        let zs_before: Vec<f32> = (0..worlds).map(|w| e.scene().nut_pose(w).0.z).collect();
+        e.step(&act, &mut b);
+        for w in 0..worlds {
+            if ended[w].is_none() && b.done(w) {
+                ended[w] = Some((t + 1, b.success[w] != 0.0, z0[w] - zs_before[w]));
+            }
+        }
+        if (t + 1) % 300 == 0 || ended.iter().all(|x| x.is_some()) {
+            let sunk: Vec<String> = (0..worlds)
+                .map(|w| match ended[w] {
+                    Some((s, ok, d)) => format!("{}@{s}:{:.1}", if ok { "S" } else { "F" }, 1e3 * d),
+                    None => format!("{:.1}", 1e3 * (z0[w] - e.scene().nut_pose(w).0.z)),
+                })
+                .collect();
+            println!("step {} ({:.0} s): sunk mm {}", t + 1, t0.elapsed().as_secs_f32(), sunk.join(" "));
+            if ended.iter().all(|x| x.is_some()) {
+                break;
+            }
+        }
+    }
+    for (i, &z) in zs.iter().enumerate() {
+        for (j, &y) in yaws.iter().enumerate() {
+            let w = i * yaws.len() + j;
+            println!("a_z {z:5.2} a_yaw {y:5.2}: {:?}", ended[w]);
+        }
+    }
+}
