@@ -23,6 +23,9 @@ fn main() {
     if let Ok(v) = std::env::var("PATCH_ITERS") {
         cfg.link_patch_iters = v.parse().unwrap();
     }
+    if let Ok(v) = std::env::var("GRASP_HEIGHT") {
+        cfg.grasp_height = v.parse().unwrap();
+    }
     if let Ok(v) = std::env::var("WRIST_DAMPING") {
         cfg.wrist_damping = v.parse().unwrap();
     }
@@ -38,6 +41,10 @@ fn main() {
         println!("fingertip at Q_START: {:?} quat {:?}", arm.ee_pos[0], arm.ee_quat[0]);
         return;
     }
+    // DUMP=t1,t2,...: print the contacts other than the thread's at those steps.
+    let dump: Vec<usize> = std::env::var("DUMP")
+        .map(|v| v.split(',').map(|x| x.parse().unwrap()).collect())
+        .unwrap_or_default();
     let mut a = [0.0f32; 12];
     a[2] = z;
     a[5] = yaw;
@@ -46,6 +53,25 @@ fn main() {
         let q = e.scene().sim.joints.joint_q.clone();
         e.step(&a, &mut b);
         let o = if b.done(0) { &prev } else { &b.observation };
+        if dump.contains(&t) {
+            let s = e.scene();
+            let (np, _) = s.nut_pose(0);
+            let pc = s.sim.model.contacts.pairs.len();
+            if let Some(c) = &s.sim.contacts {
+                for p in (0..pc).filter(|&p| p != s.thread_pair) {
+                    for patch in &c.patches[p] {
+                        println!("  pair {p} patch n {:?} area {:.2e}", patch.normal, patch.area);
+                        for k in &patch.contacts {
+                            let r = k.point - np;
+                            println!(
+                                "    at nut+[{:6.2} {:6.2} {:6.2}] mm depth {:6.3} mm n [{:6.3} {:6.3} {:6.3}]",
+                                r.x * 1e3, r.y * 1e3, r.z * 1e3, k.depth * 1e3, k.normal.x, k.normal.y, k.normal.z
+                            );
+                        }
+                    }
+                }
+            }
+        }
         if t % 10 == 0 || b.done(0) {
             let d = ((o[0] - o[13]).powi(2) + (o[1] - o[14]).powi(2) + (o[2] - o[15]).powi(2)).sqrt();
             println!(

@@ -16,6 +16,9 @@ fn main() {
     if let Some(s) = args.get(3) {
         cfg.pos_iters = s.parse().unwrap();
     }
+    if let Ok(v) = std::env::var("GRASP_HEIGHT") {
+        cfg.grasp_height = v.parse().unwrap();
+    }
     // Yaw actions (unidirectional: -1 no turn, +1 the full 0.1 rad clockwise increment) x z actions.
     let yaws = [-0.98f32, -0.95, -0.9, -0.8, -0.6, -0.2, 0.4, 1.0];
     let zs = [0.0f32, -1.0];

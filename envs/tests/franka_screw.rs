@@ -9,12 +9,13 @@ fn env(worlds: usize, cfg: FrankaNutBoltConfig) -> (FrankaNutBolt, StepBuffers) 
     (e, b)
 }
 
-/// The reset: fingertip on the bolt's axis, 2 mm above the nut's bottom, the nut on the bolt's first full
+/// The reset: fingertip on the bolt's axis at `grasp_height` above the nut's bottom, the nut on the bolt's first full
 /// thread (12 pitches of 2 mm above its seat; the bolt's tip is at 25 mm above the 16 mm head); 26
 /// observations, 12 actions; a negative reward.
 #[test]
 fn screw_reset_puts_the_nut_on_the_first_thread_in_the_hand() {
-    let (mut e, mut b) = env(2, FrankaNutBoltConfig::default());
+    let cfg = FrankaNutBoltConfig::default();
+    let (mut e, mut b) = env(2, cfg.clone());
     assert_eq!(e.spec().observation_dim(), 26);
     assert_eq!(e.spec().action_dim(), 12);
     e.reset(&mut b);
@@ -22,7 +23,7 @@ fn screw_reset_puts_the_nut_on_the_first_thread_in_the_hand() {
         let o = &b.observation[w * 26..(w + 1) * 26];
         let (tip, nut) = ([o[0], o[1], o[2]], [o[13], o[14], o[15]]);
         assert!(tip[0].abs() < 1e-3 && tip[1].abs() < 1e-3, "{tip:?}");
-        assert!((tip[2] - (0.016 + 0.024 + 0.002)).abs() < 1e-3, "{tip:?}");
+        assert!((tip[2] - (0.016 + 0.024 + cfg.grasp_height)).abs() < 1e-3, "{tip:?}");
         assert!(nut[0].abs() < 1e-4 && nut[1].abs() < 1e-4, "{nut:?}");
         assert!((nut[2] - (0.024 + 0.016 + 0.0065)).abs() < 5e-4, "nut centre of mass {nut:?}");
     }
@@ -31,8 +32,9 @@ fn screw_reset_puts_the_nut_on_the_first_thread_in_the_hand() {
 }
 
 /// With zero actions (yaw not turning) the closed hand holds the nut on the bolt's first thread for 5 s: the
-/// episode still running (no slip, fall or far error), the nut's height within 0.5 mm of its start (the pads
-/// did not slide along it) and the nut within 0.5 mm of the bolt's axis. Regression test for Factory's 2
+/// episode still running (no slip, fall or far error), the nut's height within 0.5 mm of its start (the nut
+/// stays on its thread) and the nut within 0.5 mm of the bolt's axis. (The hand does creep up the nut
+/// meanwhile: see `the_pads_do_not_creep_up_a_still_nut`.) Regression test for Factory's 2
 /// substeps x 16 iterations, under which the pads slid up the nut and dropped it within 0.7 s, and for the
 /// start on the tip, where the hand drifted 4.7 mm.
 #[test]
@@ -52,6 +54,26 @@ fn zero_actions_hold_the_nut_on_the_thread_for_5_s() {
     eprintln!("nut moved {:.3} mm, fingertip {:.3} mm", 1e3 * nut.distance(nut0), 1e3 * d_tip);
     assert!((nut.z - nut0.z).abs() < 5e-4, "nut height changed {} m", nut.z - nut0.z);
     assert!(nut.truncate().length() < 5e-4, "nut off the bolt's axis by {} m", nut.truncate().length());
+}
+
+/// Known failure (issue 21): with the nut still on its thread and the hand not turning, the fingertip should
+/// stay where it grasped the nut, held by the pads' friction (squeeze ~24 N a pad, friction 0.65). It rises
+/// instead, ~7 mm in 500 steps, and stops near the nut's top. The pad-nut contact normals on the flats carry
+/// a small upward tilt (0.002-0.004, measured with `examples/screw_diag` DUMP=150), nothing holds the hand
+/// along z (the Screw OSC's target follows the hand), and our Gauss-Seidel friction lets a steady tangential
+/// push creep. Ignored until fixed; run with `--ignored`.
+#[test]
+#[ignore = "issue 21: the pads creep up a still nut (~7 mm in 500 steps)"]
+fn the_pads_do_not_creep_up_a_still_nut() {
+    let cfg = FrankaNutBoltConfig { unidirectional_rot: false, ..Default::default() };
+    let (mut e, mut b) = env(1, cfg);
+    e.reset(&mut b);
+    let gap0 = b.observation[15] - b.observation[2];
+    for _ in 0..500 {
+        e.step(&[0.0; 12], &mut b);
+    }
+    let gap = b.observation[15] - b.observation[2];
+    assert!((gap0 - gap).abs() < 1e-3, "the fingertip rose {:.2} mm along the nut", 1e3 * (gap0 - gap));
 }
 
 /// Full clockwise yaw for 48 steps (0.8 s): the hand turns the nut and the nut follows the thread, sinking

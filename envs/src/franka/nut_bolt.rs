@@ -38,8 +38,6 @@ use crate::error::{EnvError, Result};
 pub const KEYPOINT_AXIS: f32 = 0.112071;
 /// Factory's finger pad length [m] (the slip test).
 pub const FINGERPAD_LENGTH: f32 = 0.017608;
-/// Fingertip frame above the nut's bottom while holding it [m] (as the scripted scene grips it).
-pub const GRASP_HEIGHT: f32 = 0.002;
 
 /// The tasks on this env.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -102,11 +100,18 @@ pub struct FrankaNutBoltConfig {
     /// Damping of arm joints 1-6 [N m s/rad] (IsaacGymEnvs' Factory Franka URDF: 10). Factory's Screw
     /// controller acts on z and yaw only; this damping is what keeps the other axes and the arm's null space
     /// still while the hand turns. With 0.1 the hand rose along the nut's flats by ~9 mm in 2 s of turning and
-    /// lost it (regression test `the_hand_screws_the_nut_two_turns_without_climbing_it`).
+    /// lost it (regression test `the_hand_screws_the_nut_down_without_climbing_it`).
     pub arm_damping: f32,
     /// Damping of joint 7, the wrist that screws [N m s/rad] (the URDF: none). At 10, as the other joints,
     /// the OSC's yaw (kp 200) turned the hand at ~0.1 rad/s, too slow to screw the nut down in an episode.
     pub wrist_damping: f32,
+    /// Height of the fingertip frame (the pads' bottom edge) above the nut's bottom while holding it [m].
+    /// Factory grasps with the fingertip at the nut's bottom (0, the default). The pads creep up the nut while
+    /// it turns (~3-5 mm per 1000 steps; issue 21's open point), so a lower grasp lasts longer: under a
+    /// constant yaw action of -0.6 the nut sank 21 mm (one world seated it) at 0 against 14-16 mm at 2 mm and
+    /// 8 mm at 4.3 mm (measured with `examples/screw_diag` and `examples/screw_sweep`, 2026-12-04); at -2.3 mm
+    /// the pads reached the bolt's head before the nut was seated.
+    pub grasp_height: f32,
     /// Friction of the thread.
     pub thread_mu: f32,
     /// Thread columns per turn of the generated nut mesh.
@@ -158,6 +163,7 @@ impl Default for FrankaNutBoltConfig {
             .expect("Factory's Screw controller config is valid"),
             arm_damping: 10.0,
             wrist_damping: 0.0,
+            grasp_height: 0.0,
             thread_mu: 0.3,
             segments_per_turn: 48,
             far_error: 0.1,
@@ -191,6 +197,9 @@ impl FrankaNutBoltConfig {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(field, format!("{v} is not a finite number >= 0"));
             }
+        }
+        if !(self.grasp_height.is_finite() && (-0.005..=0.01).contains(&self.grasp_height)) {
+            return bad("grasp_height", format!("{} m is not in [-0.005, 0.01] m (the pads must span the nut)", self.grasp_height));
         }
         let r = &self.randomize;
         let ranges = [("randomize.hand_angle_deg", r.hand_angle_deg, 180.0)]
@@ -417,7 +426,7 @@ impl FrankaNutBolt {
         let half_width = 0.5 * d.width_across_flats as f32;
         q[ARM_DOF] = half_width + 2e-4;
         q[ARM_DOF + 1] = half_width + 2e-4;
-        let reset_q = inverse_kinematics(&scene, &q, Vec3::new(0.0, 0.0, head + start_z + GRASP_HEIGHT), down);
+        let reset_q = inverse_kinematics(&scene, &q, Vec3::new(0.0, 0.0, head + start_z + cfg.grasp_height), down);
         let com_local = scene.nb.nut.mass_properties.com;
         // The task registry: one entry per `task` name.
         let task: Box<dyn NutBoltTask> = match cfg.task {
@@ -581,7 +590,7 @@ impl FrankaNutBolt {
         // On the helix: turning counterclockwise by `angle` raises a right-hand nut by pitch * angle / 2 pi.
         let nut_p = self.reset_nut.0 + Vec3::Z * (self.scene.nb.pitch * angle / std::f32::consts::TAU);
         let head = self.scene.nb.dims.head_height as f32;
-        let grasp = Vec3::new(0.0, 0.0, head + nut_p.z + GRASP_HEIGHT);
+        let grasp = Vec3::new(0.0, 0.0, head + nut_p.z + self.cfg.grasp_height);
         let tip = grasp + turn * Vec3::new(o.x, o.y, 0.0) + Vec3::Z * o.z;
         let mut q = inverse_kinematics(&self.scene, &self.reset_q, tip, turn * self.down);
         // The fingers close along the nut's x: the left one (+y of the hand) to the flat at -o.x + w/2.
