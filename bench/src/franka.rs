@@ -206,6 +206,10 @@ impl FrankaNutBolt {
             // task still and damps the screw stage's free axes.
             arm_damping: [0.1; 7],
             base: SCRIPTED_BASE,
+            // 24 N per finger on the nut (the Franka Hand holds 70 N continuously), enough to turn it in the
+            // thread without slipping in the hand. (The Screw env squeezes with Factory's 500 N/m: at 2000 its
+            // pads crept up a nut they held still; this scene's figures were measured at 2000.)
+            finger_drive: [2000.0, 50.0],
         };
         let scene = NutBoltScene::build(
             gpu,

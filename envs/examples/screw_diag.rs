@@ -42,9 +42,9 @@ fn main() {
         return;
     }
     // DUMP=t1,t2,...: print the contacts other than the thread's at those steps.
-    let dump: Vec<usize> = std::env::var("DUMP")
-        .map(|v| v.split(',').map(|x| x.parse().unwrap()).collect())
-        .unwrap_or_default();
+    let dump: Vec<usize> =
+        std::env::var("DUMP").map(|v| v.split(',').map(|x| x.parse().unwrap()).collect()).unwrap_or_default();
+    let mut fz_sum = glam::Vec3::ZERO;
     let mut a = [0.0f32; 12];
     a[2] = z;
     a[5] = yaw;
@@ -53,19 +53,35 @@ fn main() {
         let q = e.scene().sim.joints.joint_q.clone();
         e.step(&a, &mut b);
         let o = if b.done(0) { &prev } else { &b.observation };
+        {
+            let s = e.scene();
+            let f1 = s.sim.pair_force(0, 1) + s.sim.pair_force(0, 2);
+            fz_sum += f1;
+            if t % 50 == 49 {
+                println!("  mean pad force over the last 50 steps {:?} N", fz_sum / 50.0);
+                fz_sum = glam::Vec3::ZERO;
+            }
+        }
         if dump.contains(&t) {
             let s = e.scene();
             let (np, _) = s.nut_pose(0);
             let pc = s.sim.model.contacts.pairs.len();
             if let Some(c) = &s.sim.contacts {
                 for p in (0..pc).filter(|&p| p != s.thread_pair) {
+                    println!("  pair {p} force on the query shape {:?} N", s.sim.pair_force(0, p));
                     for patch in &c.patches[p] {
                         println!("  pair {p} patch n {:?} area {:.2e}", patch.normal, patch.area);
                         for k in &patch.contacts {
                             let r = k.point - np;
                             println!(
                                 "    at nut+[{:6.2} {:6.2} {:6.2}] mm depth {:6.3} mm n [{:6.3} {:6.3} {:6.3}]",
-                                r.x * 1e3, r.y * 1e3, r.z * 1e3, k.depth * 1e3, k.normal.x, k.normal.y, k.normal.z
+                                r.x * 1e3,
+                                r.y * 1e3,
+                                r.z * 1e3,
+                                k.depth * 1e3,
+                                k.normal.x,
+                                k.normal.y,
+                                k.normal.z
                             );
                         }
                     }

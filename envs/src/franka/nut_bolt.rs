@@ -106,12 +106,16 @@ pub struct FrankaNutBoltConfig {
     /// the OSC's yaw (kp 200) turned the hand at ~0.1 rad/s, too slow to screw the nut down in an episode.
     pub wrist_damping: f32,
     /// Height of the fingertip frame (the pads' bottom edge) above the nut's bottom while holding it [m].
-    /// Factory grasps with the fingertip at the nut's bottom (0, the default). The pads creep up the nut while
-    /// it turns (~3-5 mm per 1000 steps; issue 21's open point), so a lower grasp lasts longer: under a
-    /// constant yaw action of -0.6 the nut sank 21 mm (one world seated it) at 0 against 14-16 mm at 2 mm and
-    /// 8 mm at 4.3 mm (measured with `examples/screw_diag` and `examples/screw_sweep`, 2026-12-04); at -2.3 mm
-    /// the pads reached the bolt's head before the nut was seated.
+    /// Factory grasps with the fingertip at the nut's bottom (0, the default). At -2.3 mm the pads reached
+    /// the bolt's head before the nut was seated (measured with `examples/screw_diag`, 2026-12-04).
     pub grasp_height: f32,
+    /// Stiffness of the fingers' drive [N/m] (the gripper PD as an implicit joint drive; IsaacGymEnvs'
+    /// Factory `gym_default` drive: gripper 500). Closed on the nut, each finger squeezes it with this x
+    /// 12 mm (6 N at 500). At 2000 (24 N) the pads crept up a still nut by 7.6 mm in 500 steps and lost
+    /// it while screwing (regression test `the_pads_do_not_creep_up_a_still_nut`); at 500 they stay.
+    pub finger_stiffness: f32,
+    /// Damping of the fingers' drive [N s/m] (IsaacGymEnvs' Factory `gym_default`: 20).
+    pub finger_damping: f32,
     /// Friction of the thread.
     pub thread_mu: f32,
     /// Thread columns per turn of the generated nut mesh.
@@ -164,6 +168,8 @@ impl Default for FrankaNutBoltConfig {
             arm_damping: 10.0,
             wrist_damping: 0.0,
             grasp_height: 0.0,
+            finger_stiffness: 500.0,
+            finger_damping: 20.0,
             thread_mu: 0.3,
             segments_per_turn: 48,
             far_error: 0.1,
@@ -189,6 +195,8 @@ impl FrankaNutBoltConfig {
         for (field, v) in [
             ("arm_damping", self.arm_damping),
             ("wrist_damping", self.wrist_damping),
+            ("finger_stiffness", self.finger_stiffness),
+            ("finger_damping", self.finger_damping),
             ("thread_mu", self.thread_mu),
             ("far_error", self.far_error),
             ("success_bonus", self.success_bonus),
@@ -199,7 +207,10 @@ impl FrankaNutBoltConfig {
             }
         }
         if !(self.grasp_height.is_finite() && (-0.005..=0.01).contains(&self.grasp_height)) {
-            return bad("grasp_height", format!("{} m is not in [-0.005, 0.01] m (the pads must span the nut)", self.grasp_height));
+            return bad(
+                "grasp_height",
+                format!("{} m is not in [-0.005, 0.01] m (the pads must span the nut)", self.grasp_height),
+            );
         }
         let r = &self.randomize;
         let ranges = [("randomize.hand_angle_deg", r.hand_angle_deg, 180.0)]
@@ -395,6 +406,7 @@ impl FrankaNutBolt {
             thread_mu: cfg.thread_mu,
             base: BASE,
             arm_damping: std::array::from_fn(|d| if d + 1 == ARM_DOF { cfg.wrist_damping } else { cfg.arm_damping }),
+            finger_drive: [cfg.finger_stiffness, cfg.finger_damping],
         };
         let mut scene = NutBoltScene::build(
             gpu,

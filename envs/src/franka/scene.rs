@@ -58,6 +58,9 @@ pub struct SceneConfig {
     /// Damping of each arm joint [N m s/rad] (IsaacGymEnvs' Factory Franka URDF: 10 on joints 1-6, none on
     /// joint 7).
     pub arm_damping: [f32; ARM_DOF],
+    /// The fingers' drive toward the gripper target: stiffness [N/m] and damping [N s/m]. Closed on the
+    /// 24 mm nut (target 0), each finger squeezes it with stiffness x 12 mm.
+    pub finger_drive: [f32; 2],
 }
 
 /// The built scene: the simulator and what the envs need to find in it.
@@ -96,11 +99,10 @@ impl NutBoltScene {
         // IsaacGymEnvs' Factory: armature 0.01 on every Franka joint.
         art.set_armature(0.01);
         // The gripper PD as an implicit joint drive (as explicit torques such gains are unstable on a 15 g
-        // finger at Factory's time step): 2000 N/m squeezes the 24 mm nut with 24 N per finger (the Franka
-        // Hand holds 70 N continuously), enough to turn it in the thread without slipping in the hand.
+        // finger at Factory's time step).
         for d in ARM_DOF..DOF {
-            art.dof_drive_stiffness[d] = 2000.0;
-            art.dof_drive_damping[d] = 50.0;
+            art.dof_drive_stiffness[d] = cfg.finger_drive[0];
+            art.dof_drive_damping[d] = cfg.finger_drive[1];
         }
         art.dof_damping[..ARM_DOF].copy_from_slice(&cfg.arm_damping);
         let tip = art
