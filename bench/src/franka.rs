@@ -66,6 +66,9 @@ pub struct FrankaNutBoltRun {
     pub segments_per_turn: usize,
     /// Friction of the nut-bolt pair (Factory's nut and bolt: 0.3).
     pub thread_mu: f32,
+    /// The fingers' drive: stiffness [N/m] and damping [N s/m] (default 2000 / 50: 24 N of squeeze a finger
+    /// on the nut; the Screw env uses Factory's 500 / 20).
+    pub finger_drive: [f32; 2],
     /// Print world `trace_world`'s stage, fingertip and nut to stderr every this many frames (0: never).
     pub trace_every: u32,
     pub trace_world: usize,
@@ -92,6 +95,7 @@ impl Default for FrankaNutBoltRun {
             contact: ContactConfig::default(),
             segments_per_turn: 48,
             thread_mu: 0.3,
+            finger_drive: [2000.0, 50.0],
             trace_every: 0,
             trace_world: 0,
         }
@@ -206,10 +210,7 @@ impl FrankaNutBolt {
             // task still and damps the screw stage's free axes.
             arm_damping: [0.1; 7],
             base: SCRIPTED_BASE,
-            // 24 N per finger on the nut (the Franka Hand holds 70 N continuously), enough to turn it in the
-            // thread without slipping in the hand. (The Screw env squeezes with Factory's 500 N/m: at 2000 its
-            // pads crept up a nut they held still; this scene's figures were measured at 2000.)
-            finger_drive: [2000.0, 50.0],
+            finger_drive: run.finger_drive,
         };
         let scene = NutBoltScene::build(
             gpu,

@@ -147,6 +147,12 @@ struct SceneArgs {
     /// Tolerance end: tight or loose.
     #[arg(long, default_value = "tight")]
     fit: String,
+    /// franka-nut-bolt: stiffness of the fingers' drive [N/m] (default 2000; Factory's gym_default 500).
+    #[arg(long)]
+    finger_kp: Option<f32>,
+    /// franka-nut-bolt: damping of the fingers' drive [N s/m] (default 50; Factory's gym_default 20).
+    #[arg(long)]
+    finger_kd: Option<f32>,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -347,6 +353,10 @@ fn main() -> Result<()> {
                     ..Default::default()
                 },
                 thread_mu: args.mu.unwrap_or(base.thread_mu),
+                finger_drive: [
+                    args.finger_kp.unwrap_or(base.finger_drive[0]),
+                    args.finger_kd.unwrap_or(base.finger_drive[1]),
+                ],
                 trace_every: args.trace_frames,
                 trace_world: args.trace_world,
                 ..base

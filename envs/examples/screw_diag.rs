@@ -1,9 +1,20 @@
 //! One world of the Screw env under a constant yaw action; prints the fingertip, the nut and joint 7 every
-//! 10 steps until the episode ends.
+//! 10 steps until the episode ends, and the mean force on the finger pads every 50.
 //!
 //!   cargo run --release -p factory-envs --example screw_diag -- <a_yaw> [a_z] [steps]
+//!
+//! Config overrides from the environment: ARM_DAMPING, WRIST_DAMPING, SUBSTEPS, POS_ITERS, PATCH_ITERS,
+//! GRASP_HEIGHT, FINGER_KP, FINGER_KD. DUMP=t1,t2,... prints the pad contacts at those steps; FK_START prints
+//! where Q_START puts the fingertip and exits.
 
 use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
+
+/// Overrides `field` from the environment variable `name` when it is set.
+fn set<T: std::str::FromStr>(name: &str, field: &mut T) {
+    if let Ok(v) = std::env::var(name) {
+        *field = v.parse().unwrap_or_else(|_| panic!("{name}={v} does not parse"));
+    }
+}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -11,24 +22,14 @@ fn main() {
     let z: f32 = args.get(2).map(|s| s.parse().unwrap()).unwrap_or(0.0);
     let steps: usize = args.get(3).map(|s| s.parse().unwrap()).unwrap_or(1000);
     let mut cfg = FrankaNutBoltConfig::default();
-    if let Ok(v) = std::env::var("ARM_DAMPING") {
-        cfg.arm_damping = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("SUBSTEPS") {
-        cfg.substeps = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("POS_ITERS") {
-        cfg.pos_iters = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("PATCH_ITERS") {
-        cfg.link_patch_iters = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("GRASP_HEIGHT") {
-        cfg.grasp_height = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("WRIST_DAMPING") {
-        cfg.wrist_damping = v.parse().unwrap();
-    }
+    set("ARM_DAMPING", &mut cfg.arm_damping);
+    set("WRIST_DAMPING", &mut cfg.wrist_damping);
+    set("SUBSTEPS", &mut cfg.substeps);
+    set("POS_ITERS", &mut cfg.pos_iters);
+    set("PATCH_ITERS", &mut cfg.link_patch_iters);
+    set("GRASP_HEIGHT", &mut cfg.grasp_height);
+    set("FINGER_KP", &mut cfg.finger_stiffness);
+    set("FINGER_KD", &mut cfg.finger_damping);
     let mut e = FrankaNutBolt::new(&cfg, 1, 0).unwrap();
     let mut b = StepBuffers::new(e.spec());
     e.reset(&mut b);

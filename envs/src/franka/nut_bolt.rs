@@ -9,7 +9,8 @@
 //! the nut clockwise (tightening). The controller (`[env.controller]`, any of the seven) turns the targets
 //! into joint torques; the gripper is held closed by the finger drives. One action per control step of `dt`.
 //!
-//! The Screw task (FactoryTaskNutBoltScrew): the nut starts on the bolt's tip in the closed hand; the
+//! The Screw task (FactoryTaskNutBoltScrew): the nut starts on the bolt's first thread in the closed hand
+//! (IsaacGymEnvs: resting on the tip; `start_engaged`), gripped with the fingertip at its bottom; the
 //! observation is the fingertip's pose and twist and the nut's centre-of-mass pose and twist (26; plus the
 //! finger contact forces (6) and the previous action (12) when asked, the paper's observation ablation);
 //! the reward is `-(nut-to-target keypoint distance + fingertip-to-nut keypoint distance)`, each the sum over
