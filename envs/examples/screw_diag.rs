@@ -1,5 +1,5 @@
 //! One world of the Screw env under a constant yaw action; prints the fingertip, the nut and joint 7 every
-//! 10 steps until the episode ends, and the mean force on the finger pads every 50.
+//! 10 steps (EVERY=n) until the episode ends, and the mean force on the finger pads every 50.
 //!
 //!   cargo run --release -p factory-envs --example screw_diag -- <a_yaw> [a_z] [steps]
 //!
@@ -46,6 +46,7 @@ fn main() {
     // DUMP=t1,t2,...: print the contacts other than the thread's at those steps.
     let dump: Vec<usize> =
         std::env::var("DUMP").map(|v| v.split(',').map(|x| x.parse().unwrap()).collect()).unwrap_or_default();
+    let every: usize = std::env::var("EVERY").map(|v| v.parse().unwrap()).unwrap_or(10);
     let mut fz_sum = glam::Vec3::ZERO;
     let mut a = [0.0f32; 12];
     a[2] = z;
@@ -90,7 +91,7 @@ fn main() {
                 }
             }
         }
-        if t % 10 == 0 || b.done(0) {
+        if t % every == 0 || b.done(0) {
             let d = ((o[0] - o[13]).powi(2) + (o[1] - o[14]).powi(2) + (o[2] - o[15]).powi(2)).sqrt();
             println!(
                 "t {t:4} tip [{:7.4} {:7.4} {:7.4}] nut [{:7.4} {:7.4} {:7.4}] |tip-nut| {:.4} q {:?} fingers {:.4} {:.4}",
