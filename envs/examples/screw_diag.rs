@@ -4,10 +4,13 @@
 //!   cargo run --release -p factory-envs --example screw_diag -- <a_yaw> [a_z] [steps]
 //!
 //! Config overrides from the environment: ARM_DAMPING, WRIST_DAMPING, SUBSTEPS, POS_ITERS, PATCH_ITERS,
-//! GRASP_HEIGHT, FINGER_KP, FINGER_KD, START_ENGAGED. DUMP=t1,t2,... prints the pad contacts at those steps; FK_START prints
-//! where Q_START puts the fingertip and exits.
+//! GRASP_HEIGHT, FINGER_KP, FINGER_KD, START_ENGAGED. DUMP=t1,t2,... prints the pad contacts at those steps;
+//! FK_START prints where Q_START puts the fingertip and exits.
 
 use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
+
+/// Where the finger-force observation starts: after the 26 of fingertip and nut pose and twist.
+const FINGER_FORCE: usize = 26;
 
 /// Overrides `field` from the environment variable `name` when it is set.
 fn set<T: std::str::FromStr>(name: &str, field: &mut T) {
@@ -31,6 +34,7 @@ fn main() {
     set("FINGER_KP", &mut cfg.finger_stiffness);
     set("FINGER_KD", &mut cfg.finger_damping);
     set("START_ENGAGED", &mut cfg.start_engaged);
+    cfg.observe_finger_force = true;
     let mut e = FrankaNutBolt::new(&cfg, 1, 0).unwrap();
     let mut b = StepBuffers::new(e.spec());
     e.reset(&mut b);
@@ -57,9 +61,9 @@ fn main() {
         e.step(&a, &mut b);
         let o = if b.done(0) { &prev } else { &b.observation };
         {
-            let s = e.scene();
-            let f1 = s.sim.pair_force(0, 1) + s.sim.pair_force(0, 2);
-            fz_sum += f1;
+            // The env's finger-force observation: the pads' forces on the nut; the pads felt the opposite.
+            let on_nut = |i: usize| glam::Vec3::new(o[i], o[i + 1], o[i + 2]);
+            fz_sum -= on_nut(FINGER_FORCE) + on_nut(FINGER_FORCE + 3);
             if t % 50 == 49 {
                 println!("  mean pad force over the last 50 steps {:?} N", fz_sum / 50.0);
                 fz_sum = glam::Vec3::ZERO;

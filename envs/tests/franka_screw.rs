@@ -9,9 +9,9 @@ fn env(worlds: usize, cfg: FrankaNutBoltConfig) -> (FrankaNutBolt, StepBuffers) 
     (e, b)
 }
 
-/// The reset: fingertip on the bolt's axis at `grasp_height` above the nut's bottom, the nut on the bolt's first full
-/// thread (12 pitches of 2 mm above its seat; the bolt's tip is at 25 mm above the 16 mm head); 26
-/// observations, 12 actions; a negative reward.
+/// The reset: fingertip on the bolt's axis at `grasp_height` above the nut's bottom, the nut on the bolt's
+/// first full thread (12 pitches of 2 mm above its seat; the bolt's tip is at 25 mm above the 16 mm head);
+/// 26 observations, 12 actions; a negative reward.
 #[test]
 fn screw_reset_puts_the_nut_on_the_first_thread_in_the_hand() {
     let cfg = FrankaNutBoltConfig::default();
@@ -109,8 +109,8 @@ fn clockwise_yaw_drives_the_nut_down_the_thread() {
 }
 
 /// A moderate constant clockwise yaw (a = -0.6: 0.02 rad per step) screws the nut down for 5 s: the nut sinks
-/// at least 3 mm (1.5 pitches; the wrist turns at ~2.4 rad/s) and the fingertip stays within 1.5 mm of where it sat on the nut (the hand
-/// follows the nut down instead of climbing its flats). Regression test for arm damping 0.1 on every joint
+/// at least 3 mm (1.5 pitches; the wrist turns at ~2.4 rad/s) and the fingertip stays within 1.5 mm of where
+/// it sat on the nut (the hand follows the nut down instead of climbing its flats). Regression test for arm damping 0.1 on every joint
 /// and the robot standing on the table top instead of on the floor below it: the free axes of Factory's
 /// z-and-yaw controller drifted, the hand rose ~9 mm along the nut within 2 s of turning and dropped it,
 /// and no constant action screwed the nut more than 2 mm.
@@ -136,7 +136,7 @@ fn the_hand_screws_the_nut_down_without_climbing_it() {
 
 /// The Screw task is solvable in the env's physics: a constant clockwise yaw (a = -0.6) with no other action
 /// screws the nut from the first thread down to its seat (within one pitch: success) inside 2000 steps
-/// (33 s; measured: success at step 1610, 2026-12-04), the fingertip riding down with it. Regression test
+/// (33 s; measured: success at step 1609, 2026-12-04), the fingertip riding down with it. Regression test
 /// for the pads creeping up the nut under a 24 N squeeze: every constant action failed after 14-21 mm.
 #[test]
 fn a_constant_clockwise_yaw_seats_the_nut() {
