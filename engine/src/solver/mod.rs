@@ -253,6 +253,44 @@ struct RowCache {
     tangents: [Vec3; 2],
     /// Inverse effective mass along the normal, tangent 1 and tangent 2 [1/kg].
     k: [f32; 3],
+    /// For a row on an articulation link: what a unit impulse along the normal, tangent 1 and tangent 2
+    /// does to every body it moves (None: a row between rigid bodies, or more link bodies than
+    /// [`LINK_DIR_BODIES`] holds; those go through [`Step::apply`]).
+    link: Option<[LinkDir; 3]>,
+}
+
+/// The most bodies one [`LinkDir`] moves: the row's two rigid sides and the articulation's link bodies.
+const LINK_DIR_BODIES: usize = 4;
+
+/// The velocity change a unit impulse along one direction of a row on an articulation link makes: the
+/// row's rigid bodies through their mass and inertia, and every link body through the substep's K blocks
+/// (an impulse on one finger moves the arm, so the other finger too). [`Step::apply`] computes the same
+/// per impulse from the K blocks (a 6 x 6 product per link body and side); the finger pads' rows are swept
+/// `link_patch_iters` times per sweep, and that product was half of an articulated step (perf, 2026-12-04).
+#[derive(Clone, Copy, Debug, Default)]
+struct LinkDir {
+    /// (body, twist change [m/s, rad/s] per N s), the first `moved_len` used.
+    moved: [(u32, [Vec3; 2]); LINK_DIR_BODIES],
+    moved_len: u8,
+    /// (articulation slot, spatial impulse [N s, N m s] per N s), the first `phi_len` used.
+    phi: [(u32, [Vec3; 2]); 2],
+    phi_len: u8,
+}
+
+impl LinkDir {
+    /// Applies `x` [N s] along the direction: the bodies' twists and the slots' spatial impulses.
+    fn apply(&self, vel: &mut Vels, x: f32) {
+        for (body, dv) in &self.moved[..self.moved_len as usize] {
+            let v = &mut vel.v[*body as usize];
+            v[0] += dv[0] * x;
+            v[1] += dv[1] * x;
+        }
+        for (slot, phi) in &self.phi[..self.phi_len as usize] {
+            let p = &mut vel.phi[*slot as usize];
+            p[0] += phi[0] * x;
+            p[1] += phi[1] * x;
+        }
+    }
 }
 
 /// Warm-start match (solver.wgsl's WARM_DISTANCE, WARM_COS): a row takes over the impulses of the row in
@@ -754,6 +792,41 @@ impl Step<'_> {
         k
     }
 
+    /// The [`LinkDir`] of a row along unit `d` (None when the row touches no link body or the
+    /// articulation has more link bodies than it holds).
+    fn link_dir(&self, r: &Row, l: &Lever, d: Vec3) -> Option<LinkDir> {
+        let resp = self.links.as_ref()?;
+        let sides = self.link_impulses(r, l, d);
+        if sides.iter().all(Option::is_none) || self.link_bodies.len() + 2 > LINK_DIR_BODIES {
+            return None;
+        }
+        let mut out = LinkDir::default();
+        let mut push = |body: usize, dv: [Vec3; 2]| {
+            out.moved[out.moved_len as usize] = (body as u32, dv);
+            out.moved_len += 1;
+        };
+        if self.inv_m(r.a) > 0.0 {
+            push(r.a, [self.inv_m(r.a) * d, l.ia * l.ra.cross(d)]);
+        }
+        if self.inv_m(r.b) > 0.0 {
+            push(r.b, [-self.inv_m(r.b) * d, -(l.ib * l.rb.cross(d))]);
+        }
+        for (s, &body) in self.link_bodies.iter().enumerate() {
+            let mut dv = [Vec3::ZERO; 2];
+            for (t, phi) in sides.iter().flatten() {
+                let r = resp.response(s, *t, *phi);
+                dv[0] += r[0];
+                dv[1] += r[1];
+            }
+            push(body, dv);
+        }
+        for (t, phi) in sides.into_iter().flatten() {
+            out.phi[out.phi_len as usize] = (t as u32, phi);
+            out.phi_len += 1;
+        }
+        Some(out)
+    }
+
     /// Applies impulse `imp` [N s] to a and its opposite to b.
     fn apply(&self, r: &Row, l: &Lever, vel: &mut Vels, imp: Vec3) {
         vel.v[r.a][0] += self.inv_m(r.a) * imp;
@@ -809,11 +882,12 @@ fn solve_row(
     bias: bool,
     resample: bool,
 ) {
-    // The patch's normal impulse per contact (solver.wgsl's patch_normal_share), summed in slot order.
-    let share = |patch: &[Row]| patch.iter().map(|r| r.lambda_n).sum::<f32>() / patch.len().max(1) as f32;
     let (cfg, h) = (ctx.cfg, ctx.h);
     let pooled = cfg.friction_per_patch;
-    let r = &mut patch[i];
+    let len = patch.len();
+    // The row and its patch's other rows, so the cache is read in place while the row's impulses change.
+    let (before, rest) = patch.split_at_mut(i);
+    let (r, after) = rest.split_first_mut().expect("row index within its patch");
     let ((pa, qa), (pb, qb)) = (pos[r.a], pos[r.b]);
     let pair = &ctx.flat.pairs[r.pair];
     let x = pa + qa * r.anchor_a;
@@ -839,18 +913,17 @@ fn solve_row(
             None => return,
         }
     };
-    let c = match r.cache {
-        Some(c) => c,
-        None => {
-            let lever = ctx.lever(r, pos, n);
-            let t1 = n.any_orthonormal_vector();
-            let t2 = n.cross(t1);
-            let k = [ctx.eff(r, &lever, n), ctx.eff(r, &lever, t1), ctx.eff(r, &lever, t2)];
-            let c = RowCache { lever, tangents: [t1, t2], k };
-            r.cache = Some(c);
-            c
-        }
-    };
+    if r.cache.is_none() {
+        let lever = ctx.lever(r, pos, n);
+        let t1 = n.any_orthonormal_vector();
+        let t2 = n.cross(t1);
+        let k = [ctx.eff(r, &lever, n), ctx.eff(r, &lever, t1), ctx.eff(r, &lever, t2)];
+        let link = ctx
+            .link_dir(r, &lever, n)
+            .and_then(|dn| Some([dn, ctx.link_dir(r, &lever, t1)?, ctx.link_dir(r, &lever, t2)?]));
+        r.cache = Some(RowCache { lever, tangents: [t1, t2], k, link });
+    }
+    let Some(c) = r.cache.as_ref() else { return };
     let l = c.lever;
     let (ra, rb) = (l.ra, l.rb);
     let (a, b) = (r.a, r.b);
@@ -871,11 +944,19 @@ fn solve_row(
     let new = (r.lambda_n + (target - vn) / k).max(0.0);
     let d = new - r.lambda_n;
     r.lambda_n = new;
-    ctx.apply(r, &l, vel, n * d);
+    match &c.link {
+        Some(dirs) => dirs[0].apply(vel, d),
+        None => ctx.apply(r, &l, vel, n * d),
+    }
     let mu = r.mu;
     if mu > 0.0 {
-        let limit = if pooled { mu * share(patch) } else { mu * patch[i].lambda_n };
-        let r = &mut patch[i];
+        let limit = if pooled {
+            // The patch's normal impulse per contact (solver.wgsl's patch_normal_share), summed in slot order.
+            let sum = before.iter().map(|o| o.lambda_n).chain([r.lambda_n]).chain(after.iter().map(|o| o.lambda_n));
+            mu * sum.sum::<f32>() / len.max(1) as f32
+        } else {
+            mu * r.lambda_n
+        };
         for (j, t) in c.tangents.into_iter().enumerate() {
             let kt = c.k[1 + j];
             if kt <= 0.0 {
@@ -885,7 +966,10 @@ fn solve_row(
             let new = (r.lambda_t[j] - vt / kt).clamp(-limit, limit);
             let d = new - r.lambda_t[j];
             r.lambda_t[j] = new;
-            ctx.apply(r, &l, vel, t * d);
+            match &c.link {
+                Some(dirs) => dirs[1 + j].apply(vel, d),
+                None => ctx.apply(r, &l, vel, t * d),
+            }
         }
     }
 }
