@@ -2,8 +2,8 @@
 //! clearance in the zero pose against ISO 965-1, and bounds against Factory's M16 meshes.
 
 use factory_assets::{
-    bolt_closed_form_volume, nut_bolt, nut_closed_form_volume, Fit, IsoSize, NutBolt, ThreadOptions, ThreadSpec,
-    STEEL_DENSITY,
+    bolt_closed_form_volume, bolt_tip_chamfer_volume, nut_bolt, nut_closed_form_volume, Fit, IsoSize, NutBolt,
+    ThreadOptions, ThreadSpec, STEEL_DENSITY,
 };
 use factory_engine::mesh::TriMesh;
 use glam::DVec3;
@@ -87,6 +87,41 @@ fn m16_bounds_match_factory_meshes() {
         assert!((lo.z - 0.016).abs() < TOL && (hi.z - 0.029).abs() < TOL, "nut z {lo} {hi}");
         assert!((hi.x - 0.012).abs() < TOL && (lo.x + 0.012).abs() < TOL, "nut x {lo} {hi}");
         assert!((hi.y - 0.013856).abs() < 1e-5 && (lo.y + 0.013856).abs() < 1e-5, "nut y {lo} {hi}");
+    }
+}
+
+/// The chamfered tip (ISO 4753): the mesh stays closed; the mass it loses is the chamfer's volume (a
+/// quadrature) within 5%; no vertex lies outside the 45-degree cone; the end face's radius is the minor
+/// radius d3 / 2, within 0.1 mm of Factory's M16 bolt mesh (6.72 mm, its top vertices); the analytic SDF
+/// carries the same cone; the nut is unchanged.
+#[test]
+fn m16_bolt_tip_chamfer() {
+    for fit in Fit::ALL {
+        let plain = build(IsoSize::M16, fit);
+        let nb = nut_bolt(IsoSize::M16, fit, &ThreadOptions { bolt_tip_chamfer: true, ..Default::default() }).unwrap();
+        let topo = nb.bolt.mesh.topology();
+        assert!(topo.is_watertight(), "{fit}: {topo:?}");
+        let removed = bolt_tip_chamfer_volume(&nb.spec);
+        let closed = (bolt_closed_form_volume(&nb.spec, &nb.dims) - removed) * STEEL_DENSITY as f64;
+        let mesh = nb.bolt.mass_properties.mass as f64;
+        assert!((mesh - closed).abs() / closed < MASS_REL_TIGHT, "{fit}: bolt {mesh} vs {closed}");
+        // The chamfer is only ~0.08% of the bolt, under that tolerance: the mass it takes off the mesh (the
+        // rest of the mesh is the same) against the quadrature.
+        let cut = plain.bolt.mass_properties.mass as f64 - mesh;
+        let expect = removed * STEEL_DENSITY as f64;
+        println!("{fit}: the chamfer takes {cut:.3e} kg off the mesh, the quadrature {expect:.3e} kg");
+        assert!((cut - expect).abs() < 0.05 * expect, "{fit}: {cut} vs {expect}");
+        let tip = nb.bolt_tip_radius.unwrap();
+        // ISO 4753: at most the rounded root's minor diameter d3 = d - 1.226869 P.
+        assert!(tip <= 0.5 * (0.016 - 1.226869 * 0.002) + 1e-12, "{fit}: tip radius {tip}");
+        assert!((tip - 6.72e-3).abs() < 1e-4, "{fit}: tip radius {tip}");
+        let top = 0.041f64;
+        for v in nb.bolt.mesh.positions.iter().filter(|v| v.z as f64 > top - 2e-3) {
+            let r = (v.x as f64).hypot(v.y as f64);
+            assert!(r <= tip + (top - v.z as f64) + 1e-6, "{fit}: vertex {v} outside the cone");
+        }
+        assert_eq!(nb.bolt_sdf().tip_radius, tip as f32);
+        assert_eq!(nb.nut.mass_properties.mass, plain.nut.mass_properties.mass);
     }
 }
 

@@ -69,6 +69,8 @@ pub struct FrankaNutBoltRun {
     /// The fingers' drive: stiffness [N/m] and damping [N s/m] (default 2000 / 50: 24 N of squeeze a finger
     /// on the nut; the Screw env uses Factory's 500 / 20).
     pub finger_drive: [f32; 2],
+    /// Chamfer the bolt's tip (ISO 4753, as Factory's bolt).
+    pub bolt_tip_chamfer: bool,
     /// Print world `trace_world`'s stage, fingertip and nut to stderr every this many frames (0: never).
     pub trace_every: u32,
     pub trace_world: usize,
@@ -96,6 +98,7 @@ impl Default for FrankaNutBoltRun {
             segments_per_turn: 48,
             thread_mu: 0.3,
             finger_drive: [2000.0, 50.0],
+            bolt_tip_chamfer: false,
             trace_every: 0,
             trace_world: 0,
         }
@@ -211,6 +214,7 @@ impl FrankaNutBolt {
             arm_damping: [0.1; 7],
             base: SCRIPTED_BASE,
             finger_drive: run.finger_drive,
+            bolt_tip_chamfer: run.bolt_tip_chamfer,
         };
         let scene = NutBoltScene::build(
             gpu,

@@ -153,6 +153,9 @@ struct SceneArgs {
     /// franka-nut-bolt: damping of the fingers' drive [N s/m] (default 50; Factory's gym_default 20).
     #[arg(long)]
     finger_kd: Option<f32>,
+    /// franka-nut-bolt: chamfer the bolt's tip (ISO 4753, as Factory's bolt).
+    #[arg(long)]
+    bolt_tip_chamfer: bool,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -357,6 +360,7 @@ fn main() -> Result<()> {
                     args.finger_kp.unwrap_or(base.finger_drive[0]),
                     args.finger_kd.unwrap_or(base.finger_drive[1]),
                 ],
+                bolt_tip_chamfer: args.bolt_tip_chamfer,
                 trace_every: args.trace_frames,
                 trace_world: args.trace_world,
                 ..base

@@ -192,10 +192,29 @@ const ANALYTIC_AREA_TOL: f32 = 0.01;
 #[test]
 fn analytic_thread_sdf_gpu_cpu_parity() {
     let nb = parts();
-    let sc = analytic_scene(&nb);
-    let gpu = GpuContext::global().unwrap();
     let phases = [0.0, 2.0, 3.5, 5.0];
-    let poses = sc.poses(5.0 * nb.pitch - 20e-6, &phases);
+    assert_analytic_parity(&analytic_scene(&nb), &phases, 5.0 * nb.pitch - 20e-6, 5000);
+}
+
+/// The same with the bolt's tip chamfered (ISO 4753; ThreadSdf::tip_radius) and the nut's bottom 0.6 mm
+/// below the end face, on the cone, at several turns: the chamfer's branch in thread.wgsl matches thread.rs.
+#[test]
+fn chamfered_tip_gpu_cpu_parity() {
+    let nb =
+        nut_bolt(IsoSize::M16, Fit::Tight, &ThreadOptions { bolt_tip_chamfer: true, ..Default::default() }).unwrap();
+    let sc = analytic_scene(&nb);
+    assert!(nb.bolt_sdf().tip_radius > 0.0);
+    let phases = [0.0, 1.1, 2.6, 4.2];
+    let lift = (nb.dims.shank_length - 0.6e-3) as f32;
+    assert_analytic_parity(&sc, &phases, lift, 300);
+}
+
+/// GPU against CPU contacts for the analytic bolt at `lift` and `phases` (one world each): candidate counts
+/// within 2 (and above `min_candidates`), the deepest contact within 1e-8 m, patch counts within 10%, total
+/// area within ANALYTIC_AREA_TOL, area-weighted mean normals within MEAN_NORMAL_TOL_DEG.
+fn assert_analytic_parity(sc: &ContactScene, phases: &[f32], lift: f32, min_candidates: i64) {
+    let gpu = GpuContext::global().unwrap();
+    let poses = sc.poses(lift, phases);
     let pipe = ContactPipeline::new(gpu, &sc.model, phases.len() as u32, &ContactConfig::default()).unwrap();
     pipe.write_body_q(gpu, &poses);
     pipe.run(gpu);
@@ -206,7 +225,7 @@ fn analytic_thread_sdf_gpu_cpu_parity() {
     let mean_normal = |ps: &Patches| ps.iter().fold(Vec3::ZERO, |acc, p| acc + p.normal * p.area).normalize();
     for w in 0..phases.len() {
         let (a, b) = (g.candidates[w] as i64, c.candidates[w] as i64);
-        assert!(a > 5000 && (a - b).abs() <= 2, "world {w}: gpu {a} cpu {b}");
+        assert!(a > min_candidates && (a - b).abs() <= 2, "world {w}: gpu {a} cpu {b}");
         let (gp, cp) = (&g.patches[w], &c.patches[w]);
         let (da, db) = (deepest(gp), deepest(cp));
         assert!((da - db).abs() < 1e-8, "world {w}: deepest {da} vs {db}");

@@ -4,8 +4,8 @@
 //!   cargo run --release -p factory-envs --example screw_diag -- <a_yaw> [a_z] [steps]
 //!
 //! Config overrides from the environment: ARM_DAMPING, WRIST_DAMPING, SUBSTEPS, POS_ITERS, PATCH_ITERS,
-//! GRASP_HEIGHT, FINGER_KP, FINGER_KD, START_ENGAGED. DUMP=t1,t2,... prints the pad contacts at those steps;
-//! FK_START prints where Q_START puts the fingertip and exits.
+//! GRASP_HEIGHT, FINGER_KP, FINGER_KD, START_ENGAGED, BOLT_TIP_CHAMFER. DUMP=t1,t2,... prints the pad
+//! contacts at those steps; FK_START prints where Q_START puts the fingertip and exits.
 
 use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
 
@@ -34,6 +34,7 @@ fn main() {
     set("FINGER_KP", &mut cfg.finger_stiffness);
     set("FINGER_KD", &mut cfg.finger_damping);
     set("START_ENGAGED", &mut cfg.start_engaged);
+    set("BOLT_TIP_CHAMFER", &mut cfg.bolt_tip_chamfer);
     cfg.observe_finger_force = true;
     let mut e = FrankaNutBolt::new(&cfg, 1, 0).unwrap();
     let mut b = StepBuffers::new(e.spec());

@@ -3,6 +3,9 @@
 //! a simple open-loop policy screws the nut down under the env's physics.
 //!
 //!   cargo run --release -p factory-envs --example screw_sweep -- [steps] [substeps] [pos_iters]
+//!
+//! Environment: GRASP_HEIGHT [m], START_ENGAGED and BOLT_TIP_CHAMFER (true/false), ZS (the z actions,
+//! comma-separated; default 0,-1).
 
 use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
 
@@ -19,9 +22,17 @@ fn main() {
     if let Ok(v) = std::env::var("GRASP_HEIGHT") {
         cfg.grasp_height = v.parse().unwrap();
     }
+    if let Ok(v) = std::env::var("START_ENGAGED") {
+        cfg.start_engaged = v.parse().unwrap();
+    }
+    if let Ok(v) = std::env::var("BOLT_TIP_CHAMFER") {
+        cfg.bolt_tip_chamfer = v.parse().unwrap();
+    }
     // Yaw actions (unidirectional: -1 no turn, +1 the full 0.1 rad clockwise increment) x z actions.
     let yaws = [-0.98f32, -0.95, -0.9, -0.8, -0.6, -0.2, 0.4, 1.0];
-    let zs = [0.0f32, -1.0];
+    let zs: Vec<f32> = std::env::var("ZS")
+        .map(|v| v.split(',').map(|x| x.parse().expect("ZS: comma-separated numbers")).collect())
+        .unwrap_or(vec![0.0, -1.0]);
     let worlds = yaws.len() * zs.len();
     let mut e = FrankaNutBolt::new(&cfg, worlds, 0).unwrap();
     let mut b = StepBuffers::new(e.spec());

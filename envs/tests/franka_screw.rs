@@ -3,6 +3,11 @@
 use factory_envs::franka::nut_bolt::ScrewRandomization;
 use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
 
+/// The nut started on the bolt's first full thread (below the tip's chamfer), not on the tip.
+fn engaged() -> FrankaNutBoltConfig {
+    FrankaNutBoltConfig { start_engaged: true, ..Default::default() }
+}
+
 fn env(worlds: usize, cfg: FrankaNutBoltConfig) -> (FrankaNutBolt, StepBuffers) {
     let e = FrankaNutBolt::new(&cfg, worlds, 0).unwrap();
     let b = StepBuffers::new(e.spec());
@@ -10,11 +15,11 @@ fn env(worlds: usize, cfg: FrankaNutBoltConfig) -> (FrankaNutBolt, StepBuffers) 
 }
 
 /// The reset: fingertip on the bolt's axis at `grasp_height` above the nut's bottom, the nut on the bolt's
-/// first full thread (12 pitches of 2 mm above its seat; the bolt's tip is at 25 mm above the 16 mm head);
-/// 26 observations, 12 actions; a negative reward.
+/// first full thread (11 pitches of 2 mm above its seat: the bolt's tip is 25 mm above the 16 mm head and
+/// its chamfer takes the top 1.2 mm); 26 observations, 12 actions; a negative reward.
 #[test]
 fn screw_reset_puts_the_nut_on_the_first_thread_in_the_hand() {
-    let cfg = FrankaNutBoltConfig::default();
+    let cfg = engaged();
     let (mut e, mut b) = env(2, cfg.clone());
     assert_eq!(e.spec().observation_dim(), 26);
     assert_eq!(e.spec().action_dim(), 12);
@@ -23,9 +28,9 @@ fn screw_reset_puts_the_nut_on_the_first_thread_in_the_hand() {
         let o = &b.observation[w * 26..(w + 1) * 26];
         let (tip, nut) = ([o[0], o[1], o[2]], [o[13], o[14], o[15]]);
         assert!(tip[0].abs() < 1e-3 && tip[1].abs() < 1e-3, "{tip:?}");
-        assert!((tip[2] - (0.016 + 0.024 + cfg.grasp_height)).abs() < 1e-3, "{tip:?}");
+        assert!((tip[2] - (0.016 + 0.022 + cfg.grasp_height)).abs() < 1e-3, "{tip:?}");
         assert!(nut[0].abs() < 1e-4 && nut[1].abs() < 1e-4, "{nut:?}");
-        assert!((nut[2] - (0.024 + 0.016 + 0.0065)).abs() < 5e-4, "nut centre of mass {nut:?}");
+        assert!((nut[2] - (0.022 + 0.016 + 0.0065)).abs() < 5e-4, "nut centre of mass {nut:?}");
     }
     e.step(&[0.0; 24], &mut b);
     assert!(b.reward.iter().all(|r| r.is_finite() && *r < 0.0), "{:?}", b.reward);
@@ -38,7 +43,7 @@ fn screw_reset_puts_the_nut_on_the_first_thread_in_the_hand() {
 /// start on the tip, where the hand drifted 4.7 mm.
 #[test]
 fn zero_actions_hold_the_nut_on_the_thread_for_5_s() {
-    let cfg = FrankaNutBoltConfig { unidirectional_rot: false, ..Default::default() };
+    let cfg = FrankaNutBoltConfig { unidirectional_rot: false, ..engaged() };
     let (mut e, mut b) = env(1, cfg);
     e.reset(&mut b);
     let nut0 = e.scene().nut_pose(0).0;
@@ -61,7 +66,7 @@ fn zero_actions_hold_the_nut_on_the_thread_for_5_s() {
 /// while screwing the pads climbed off the nut before it was seated; at Factory's 500 N/m it stays.
 #[test]
 fn the_pads_do_not_creep_up_a_still_nut() {
-    let cfg = FrankaNutBoltConfig { unidirectional_rot: false, ..Default::default() };
+    let cfg = FrankaNutBoltConfig { unidirectional_rot: false, ..engaged() };
     let (mut e, mut b) = env(1, cfg);
     e.reset(&mut b);
     let gap0 = b.observation[15] - b.observation[2];
@@ -77,7 +82,7 @@ fn the_pads_do_not_creep_up_a_still_nut() {
 /// one pitch per turn (within 25%: the loose fit's clearance lets it sit on either flank).
 #[test]
 fn clockwise_yaw_drives_the_nut_down_the_thread() {
-    let (mut e, mut b) = env(1, FrankaNutBoltConfig::default());
+    let (mut e, mut b) = env(1, engaged());
     e.reset(&mut b);
     let (p0, q0) = e.scene().nut_pose(0);
     let mut a = [0.0f32; 12];
@@ -116,7 +121,7 @@ fn clockwise_yaw_drives_the_nut_down_the_thread() {
 /// and no constant action screwed the nut more than 2 mm.
 #[test]
 fn the_hand_screws_the_nut_down_without_climbing_it() {
-    let (mut e, mut b) = env(1, FrankaNutBoltConfig::default());
+    let (mut e, mut b) = env(1, engaged());
     e.reset(&mut b);
     let gap = |o: &[f32]| glam::Vec3::new(o[0] - o[13], o[1] - o[14], o[2] - o[15]);
     let gap0 = gap(&b.observation);
@@ -140,7 +145,7 @@ fn the_hand_screws_the_nut_down_without_climbing_it() {
 /// for the pads creeping up the nut under a 24 N squeeze: every constant action failed after 14-21 mm.
 #[test]
 fn a_constant_clockwise_yaw_seats_the_nut() {
-    let (mut e, mut b) = env(1, FrankaNutBoltConfig::default());
+    let (mut e, mut b) = env(1, engaged());
     e.reset(&mut b);
     let mut a = [0.0f32; 12];
     a[5] = -0.6;
@@ -188,7 +193,7 @@ fn table_iii_resets_are_stable_grasps() {
         hand_angle_deg: [-90.0, 90.0],
         fingertip_offset_mm: [[0.0, 0.0], [-3.0, 3.0], [0.0, 3.0]],
     };
-    let cfg = FrankaNutBoltConfig { unidirectional_rot: false, randomize, ..Default::default() };
+    let cfg = FrankaNutBoltConfig { unidirectional_rot: false, randomize, ..engaged() };
     let (mut e, mut b) = env(4, cfg);
     e.reset(&mut b);
     let start: Vec<_> = (0..4).map(|w| e.scene().nut_pose(w)).collect();
@@ -209,4 +214,40 @@ fn table_iii_resets_are_stable_grasps() {
         let p = e.scene().nut_pose(w).0;
         assert!((p.z - p0.z).abs() < 5e-4, "world {w}: nut height changed {} m", p.z - p0.z);
     }
+}
+
+/// Factory's start, the nut resting on the bolt's tip (the default), on ISO 4753's chamfer: under 16
+/// constant actions (8 yaws x a_z = -0.05, -0.2: `ZS=-0.05,-0.2 examples/screw_sweep`) at most 6 episodes
+/// fail within 300 steps (measured 4, 2026-12-04; 3 of the 16 seated the nut within 2400 steps and 4 were
+/// still screwing). Regression test for the flat-cut tip: its nut's bore edge sat on the crest and 12 of
+/// the 16 failed within 300 steps, the nut and hand sliding off the bolt's axis (1 seated). Single
+/// episodes from the tip are chaotic (a world's outcome changes with the batch it runs in), so the test
+/// counts.
+#[test]
+fn from_the_tip_the_chamfer_keeps_most_constant_actions_on_the_bolt() {
+    let cfg = FrankaNutBoltConfig::default();
+    assert!(!cfg.start_engaged && cfg.bolt_tip_chamfer);
+    let yaws = [-0.98f32, -0.95, -0.9, -0.8, -0.6, -0.2, 0.4, 1.0];
+    let zs = [-0.05f32, -0.2];
+    let worlds = yaws.len() * zs.len();
+    let (mut e, mut b) = env(worlds, cfg);
+    e.reset(&mut b);
+    let mut act = vec![0.0f32; worlds * 12];
+    for (i, &z) in zs.iter().enumerate() {
+        for (j, &y) in yaws.iter().enumerate() {
+            (act[(i * yaws.len() + j) * 12 + 2], act[(i * yaws.len() + j) * 12 + 5]) = (z, y);
+        }
+    }
+    let mut ended = vec![None; worlds];
+    for t in 0..300 {
+        e.step(&act, &mut b);
+        for (w, end) in ended.iter_mut().enumerate() {
+            if end.is_none() && b.done(w) {
+                *end = Some((t + 1, b.success[w] > 0.5));
+            }
+        }
+    }
+    let failed = ended.iter().filter(|e| matches!(e, Some((_, false)))).count();
+    eprintln!("ended within 300 steps (step, success): {ended:?}");
+    assert!(failed <= 6, "{failed} of {worlds} episodes failed within 300 steps: {ended:?}");
 }

@@ -51,6 +51,7 @@ fn analytic_load_revolved(base: u32) {
 }
 
 const SQRT3_T: f32 = 1.7320508;
+const INV_SQRT2_T: f32 = 0.70710677;
 // [m], see thread_sample.
 const HEAD_SKIP_MARGIN: f32 = 1.0e-6;
 
@@ -207,6 +208,14 @@ fn thread_sample(p: vec3<f32>) -> Sample {
         d = above;
         g = vec3<f32>(0.0, 0.0, 1.0);
     }
+    // The tip chamfer (word 11, 0 for none).
+    if (tw(11u) > 0.0) {
+        let cone = (rho + (p.z - tw(6u)) - tw(11u)) * INV_SQRT2_T;
+        if (cone > d) {
+            d = cone;
+            g = vec3<f32>(radial.x * INV_SQRT2_T, radial.y * INV_SQRT2_T, INV_SQRT2_T);
+        }
+    }
     // The head's field is at least its slab's (|z - zc| - half height; hex_prism_sample never returns
     // less, up to rounding: hence the 1 um margin), so beside the thread it cannot win: skip its two
     // segment projections and square roots (most samples of a nut on the thread are far above the head).
@@ -313,6 +322,14 @@ fn thread_sample4(px: vec4<f32>, py: vec4<f32>, pz: vec4<f32>) -> Sample4 {
     gx = select(gx, vec4<f32>(0.0), ma);
     gy = select(gy, vec4<f32>(0.0), ma);
     gz = select(gz, vec4<f32>(1.0), ma);
+    if (tw(11u) > 0.0) {
+        let cone = (rho + (pz - tw(6u)) - tw(11u)) * INV_SQRT2_T;
+        let mc = cone > d;
+        d = select(d, cone, mc);
+        gx = select(gx, rx * INV_SQRT2_T, mc);
+        gy = select(gy, ry * INV_SQRT2_T, mc);
+        gz = select(gz, vec4<f32>(INV_SQRT2_T), mc);
+    }
     // The head, where it may win (see thread_sample).
     let head_slab = abs(pz - thr.head_zc) - thr.head_half;
     let mh = vec4<bool>(tw(7u) != 0.0) & (head_slab < d + HEAD_SKIP_MARGIN);

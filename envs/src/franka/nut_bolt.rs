@@ -9,8 +9,8 @@
 //! the nut clockwise (tightening). The controller (`[env.controller]`, any of the seven) turns the targets
 //! into joint torques; the gripper is held closed by the finger drives. One action per control step of `dt`.
 //!
-//! The Screw task (FactoryTaskNutBoltScrew): the nut starts on the bolt's first thread in the closed hand
-//! (IsaacGymEnvs: resting on the tip; `start_engaged`), gripped with the fingertip at its bottom; the
+//! The Screw task (FactoryTaskNutBoltScrew): the nut starts resting on the bolt's chamfered tip in the closed
+//! hand (IsaacGymEnvs; or on the first thread, `start_engaged`), gripped with the fingertip at its bottom; the
 //! observation is the fingertip's pose and twist and the nut's centre-of-mass pose and twist (26; plus the
 //! finger contact forces (6) and the previous action (12) when asked, the paper's observation ablation);
 //! the reward is `-(nut-to-target keypoint distance + fingertip-to-nut keypoint distance)`, each the sum over
@@ -119,13 +119,17 @@ pub struct FrankaNutBoltConfig {
     pub finger_damping: f32,
     /// Friction of the thread.
     pub thread_mu: f32,
+    /// Chamfer the bolt's tip: ISO 4753's 45-degree cone down to the minor diameter, as Factory's M16 bolt
+    /// (its mesh: radius 7.98 -> 6.72 mm over the top 1.3 mm). A nut set on a flat-cut tip rested its bore's
+    /// edge on the crest and slid off sideways under the hand within ~30 steps (the tip start could not be
+    /// trained); on the cone it stays centred and engages as it turns (`examples/screw_diag`, 2026-12-04).
+    pub bolt_tip_chamfer: bool,
     /// Thread columns per turn of the generated nut mesh.
     pub segments_per_turn: usize,
-    /// Start the nut on the bolt's first full thread (engaged, up to one pitch below the tip; the default)
-    /// instead of resting on the tip (IsaacGymEnvs). Resting on the tip, nothing holds the hand sideways
-    /// (Factory's Screw controller acts on z and yaw only) and it drifted off the bolt (measured: 4.7 mm in
-    /// 5 s with zero actions at damping 0.1); engaged, the thread holds the nut and the hand stayed within
-    /// 0.3 mm.
+    /// Start the nut on the bolt's first full thread below the tip's chamfer (engaged) instead of resting
+    /// on the tip (IsaacGymEnvs' Screw, the default). Factory's Screw controller acts on z and yaw only, so
+    /// only the bolt holds the hand sideways: on a flat-cut tip the nut slid off it (see
+    /// `bolt_tip_chamfer`); on the chamfer it is centred. The engaged start is the easier task.
     pub start_engaged: bool,
     /// Nut centre-of-mass distance from its target that ends the episode as a failure [m].
     pub far_error: f32,
@@ -172,12 +176,13 @@ impl Default for FrankaNutBoltConfig {
             finger_stiffness: 500.0,
             finger_damping: 20.0,
             thread_mu: 0.3,
+            bolt_tip_chamfer: true,
             segments_per_turn: 48,
             far_error: 0.1,
             success_bonus: 0.0,
             failure_penalty: 0.0,
             randomize: ScrewRandomization::default(),
-            start_engaged: true,
+            start_engaged: false,
             observe_finger_force: false,
             observe_previous_action: false,
         }
@@ -408,6 +413,7 @@ impl FrankaNutBolt {
             base: BASE,
             arm_damping: std::array::from_fn(|d| if d + 1 == ARM_DOF { cfg.wrist_damping } else { cfg.arm_damping }),
             finger_drive: [cfg.finger_stiffness, cfg.finger_damping],
+            bolt_tip_chamfer: cfg.bolt_tip_chamfer,
         };
         let mut scene = NutBoltScene::build(
             gpu,
@@ -419,10 +425,12 @@ impl FrankaNutBolt {
         let d = scene.nb.dims;
         let (head, shank, nut_h) = (d.head_height as f32, d.shank_length as f32, d.nut_height as f32);
         // The nut on the bolt's first full thread: the highest whole number of pitches above its seat that
-        // is not above the tip (the thread maps onto itself under a one-pitch translation, so the nut fits
-        // there at yaw 0, flats normal to x: the fingers close along x at yaw 0).
+        // is not above the tip or in its chamfer (the thread maps onto itself under a one-pitch translation,
+        // so the nut fits there at yaw 0, flats normal to x: the fingers close along x at yaw 0).
         let pitch = scene.nb.pitch;
-        let start_z = if cfg.start_engaged { (shank / pitch + 1e-4).floor() * pitch } else { shank };
+        let prof = scene.nb.spec.bolt_profile();
+        let chamfer = scene.nb.bolt_tip_radius.map_or(0.0, |tip| (prof.max_radius - tip) as f32);
+        let start_z = if cfg.start_engaged { ((shank - chamfer) / pitch + 1e-4).floor() * pitch } else { shank };
         let reset_nut = (Vec3::Z * start_z, Quat::IDENTITY);
         // Factory's Screw pose, its fingertip moved onto the nut by IK: pointing down (Q_START's orientation
         // without its yaw), fingers just open around the flats.

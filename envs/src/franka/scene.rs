@@ -61,6 +61,8 @@ pub struct SceneConfig {
     /// The fingers' drive toward the gripper target: stiffness [N/m] and damping [N s/m]. Closed on the
     /// 24 mm nut (target 0), each finger squeezes it with stiffness x 12 mm.
     pub finger_drive: [f32; 2],
+    /// Chamfer the bolt's tip (ISO 4753, as Factory's bolt; `ThreadOptions::bolt_tip_chamfer`).
+    pub bolt_tip_chamfer: bool,
 }
 
 /// The built scene: the simulator and what the envs need to find in it.
@@ -77,8 +79,8 @@ pub struct NutBoltScene {
     pub thread_pair: usize,
 }
 
-fn steel_nut(size: IsoSize, segments_per_turn: usize) -> Result<NutBolt> {
-    nut_bolt(size, Fit::Loose, &ThreadOptions { segments_per_turn, ..Default::default() })
+fn steel_nut(size: IsoSize, segments_per_turn: usize, bolt_tip_chamfer: bool) -> Result<NutBolt> {
+    nut_bolt(size, Fit::Loose, &ThreadOptions { segments_per_turn, bolt_tip_chamfer, ..Default::default() })
         .map_err(|e| EnvError::Build(format!("M16 nut and bolt: {e}")))
 }
 
@@ -108,7 +110,7 @@ impl NutBoltScene {
         let tip = art
             .frame("panda_fingertip_centered")
             .ok_or_else(|| EnvError::Build(format!("{FRANKA_URDF} has no panda_fingertip_centered frame")))?;
-        let nb = steel_nut(IsoSize::M16, cfg.segments_per_turn)?;
+        let nb = steel_nut(IsoSize::M16, cfg.segments_per_turn, cfg.bolt_tip_chamfer)?;
         let mut b = ModelBuilder::new(art.gravity);
         // Factory: nut friction 0.3, Franka 1.0, table 0.3 (pairs take the mean).
         let nut = b.add_dynamic_body(&nb.nut.mass_properties);
