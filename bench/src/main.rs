@@ -153,8 +153,8 @@ struct SceneArgs {
     /// franka-nut-bolt: damping of the fingers' drive [N s/m] (default 50; Factory's gym_default 20).
     #[arg(long)]
     finger_kd: Option<f32>,
-    /// franka-nut-bolt: chamfer the bolt's tip (ISO 4753, as Factory's bolt).
-    #[arg(long)]
+    /// franka-nut-bolt: chamfer the bolt's tip (ISO 4753, as Factory's bolt); false: a flat-cut tip.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     bolt_tip_chamfer: bool,
     /// Print one JSON object.
     #[arg(long)]
