@@ -196,13 +196,17 @@ pub fn bolt_tip_radius(spec: &ThreadSpec) -> f64 {
     0.5 * (spec.nominal_diameter - 1.226869 * spec.pitch)
 }
 
+/// Axial (= radial) length of a chamfered bolt's 45-degree cone, crest radius minus end-face radius [m].
+pub fn bolt_tip_chamfer_height(spec: &ThreadSpec) -> f64 {
+    spec.bolt_profile().max_radius - bolt_tip_radius(spec)
+}
+
 /// Volume the bolt tip chamfer removes [m^3]: pi times the integral over the chamfer's height of the mean
 /// over one pitch of max(0, r(u)^2 - cone(z)^2) (at a given height the angle sweeps the helical coordinate
 /// over one period), by the midpoint rule on a 400 x 400 grid (converged to ~1e-6 of the result).
 pub fn bolt_tip_chamfer_volume(spec: &ThreadSpec) -> f64 {
     let prof = spec.bolt_profile();
-    let tip = bolt_tip_radius(spec);
-    let height = prof.max_radius - tip;
+    let (tip, height) = (bolt_tip_radius(spec), bolt_tip_chamfer_height(spec));
     let n = 400;
     let mut sum = 0.0;
     for i in 0..n {

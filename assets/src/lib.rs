@@ -32,8 +32,8 @@ pub mod pile;
 
 pub use error::{AssetError, Result};
 pub use fastener::{
-    bolt_closed_form_volume, bolt_tip_chamfer_volume, bolt_tip_radius, nut_bolt, nut_bolt_from_spec,
-    nut_closed_form_volume, NutBolt, ThreadOptions, BOLT_SDF_RESOLUTION, NUT_SDF_RESOLUTION,
+    bolt_closed_form_volume, bolt_tip_chamfer_height, bolt_tip_chamfer_volume, bolt_tip_radius, nut_bolt,
+    nut_bolt_from_spec, nut_closed_form_volume, NutBolt, ThreadOptions, BOLT_SDF_RESOLUTION, NUT_SDF_RESOLUTION,
 };
 pub use iso::{FastenerDims, Fit, Iso965Row, IsoSize, ThreadProfile, ThreadSpec, STEEL_DENSITY};
 pub use part::{Part, WrittenPart};

@@ -428,8 +428,10 @@ impl FrankaNutBolt {
         // is not above the tip or in its chamfer (the thread maps onto itself under a one-pitch translation,
         // so the nut fits there at yaw 0, flats normal to x: the fingers close along x at yaw 0).
         let pitch = scene.nb.pitch;
-        let prof = scene.nb.spec.bolt_profile();
-        let chamfer = scene.nb.bolt_tip_radius.map_or(0.0, |tip| (prof.max_radius - tip) as f32);
+        let chamfer = match scene.nb.bolt_tip_radius {
+            Some(_) => factory_assets::bolt_tip_chamfer_height(&scene.nb.spec) as f32,
+            None => 0.0,
+        };
         let start_z = if cfg.start_engaged { ((shank - chamfer) / pitch + 1e-4).floor() * pitch } else { shank };
         let reset_nut = (Vec3::Z * start_z, Quat::IDENTITY);
         // Factory's Screw pose, its fingertip moved onto the nut by IK: pointing down (Q_START's orientation
