@@ -35,13 +35,13 @@ use factory_engine::contact::ContactConfig;
 use factory_engine::gpu::GpuContext;
 use factory_engine::rng::SplitMix64;
 use factory_engine::solver::{Control, SolverConfig};
-use factory_engine::urdf::load_urdf;
+
 use factory_envs::franka::scene::{NutBoltScene, SceneConfig};
 use glam::{Quat, Vec3};
-use std::path::PathBuf;
+
 use std::time::Instant;
 
-pub use factory_envs::franka::scene::{BASE, FRANKA_URDF, Q_START};
+pub use factory_envs::franka::scene::{franka_urdf, BASE, FRANKA_URDF, Q_START};
 
 /// The scripted scene's robot base [m]: on the table top, 0.5 m behind the bolt (the Screw env stands it on
 /// the floor 0.4 m below, as Factory, [`BASE`]). The scripted scene's figures in docs/BENCHMARKS.md were
@@ -495,7 +495,7 @@ pub struct ControllerBenchReport {
 /// Times the control step on the Franka at `worlds` worlds in seeded joint states.
 pub fn bench_controllers(worlds: u32, repeats: u32) -> Result<ControllerBenchReport> {
     ensure!(worlds > 0 && repeats > 0, "--worlds and --repeats must be at least 1");
-    let urdf = load_urdf(&PathBuf::from(FRANKA_URDF))?;
+    let urdf = franka_urdf()?;
     let mut art = ArticulationModel::from_urdf(&urdf, (BASE, Quat::IDENTITY), Vec3::new(0.0, 0.0, -9.81))?;
     art.set_armature(0.01);
     let tip = art.frame("panda_fingertip_centered").context("the Franka has no fingertip frame")?;

@@ -8,7 +8,6 @@
 //! half-space. Pads and table see the nut through its convex hull (a hexagonal prism: the flats the fingers
 //! grip are exact). The nut's frame is the assembly's: its pose is the identity when it is seated.
 
-use std::path::PathBuf;
 use std::sync::Arc;
 
 use factory_assets::{nut_bolt, Fit, IsoSize, NutBolt, ThreadOptions};
@@ -21,13 +20,22 @@ use factory_engine::contact::{ContactConfig, PairSpec, QueryShape, SdfShape, Tra
 use factory_engine::gpu::GpuContext;
 use factory_engine::sdf::cache::SdfCache;
 use factory_engine::solver::{BodyState, SolverConfig};
-use factory_engine::urdf::load_urdf;
+use factory_engine::urdf::{parse_urdf, UrdfModel};
 use glam::{Quat, Vec3};
 
 use crate::error::{EnvError, Result};
 
-/// The project's Franka description.
+/// The project's Franka description (where it lives in the source tree; the name in error messages).
 pub const FRANKA_URDF: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/franka/franka_panda.urdf");
+/// Its text, compiled in: it has primitives only (no mesh files), so a built binary needs no source tree
+/// (`factory-train` copied or installed elsewhere once failed reading [`FRANKA_URDF`]).
+pub const FRANKA_URDF_TEXT: &str = include_str!("../../../assets/franka/franka_panda.urdf");
+
+/// The Franka parsed from [`FRANKA_URDF_TEXT`].
+pub fn franka_urdf() -> std::result::Result<UrdfModel, factory_engine::EngineError> {
+    let path = std::path::Path::new(FRANKA_URDF);
+    parse_urdf(FRANKA_URDF_TEXT, path, path.parent().unwrap_or(std::path::Path::new("")))
+}
 /// Factory's Screw reset pose (IsaacGymEnvs FactoryTaskNutBoltScrew): the hand points down over the bolt;
 /// fingers open.
 pub const Q_START: [f32; 9] = [1.5178e-3, -0.19651, -1.4364e-3, -1.9761, -2.7717e-4, 1.7796, 0.78556, 0.04, 0.04];
@@ -96,7 +104,7 @@ impl NutBoltScene {
         if cfg.worlds == 0 {
             return Err(EnvError::InvalidValue { field: "env_count", reason: "must be at least 1".into() });
         }
-        let urdf = load_urdf(&PathBuf::from(FRANKA_URDF))?;
+        let urdf = franka_urdf()?;
         let mut art = ArticulationModel::from_urdf(&urdf, (cfg.base, Quat::IDENTITY), Vec3::new(0.0, 0.0, -9.81))?;
         // IsaacGymEnvs' Factory: armature 0.01 on every Franka joint.
         art.set_armature(0.01);
