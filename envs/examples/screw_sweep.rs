@@ -4,7 +4,7 @@
 //!
 //!   cargo run --release -p factory-envs --example screw_sweep -- [steps] [substeps] [pos_iters]
 //!
-//! Environment: GRASP_HEIGHT [m], START_ENGAGED and BOLT_TIP_CHAMFER (true/false), ZS (the z actions,
+//! Environment: LINK_PATCH_ITERS, GRASP_HEIGHT [m], START_ENGAGED and BOLT_TIP_CHAMFER (true/false), ZS (the z actions,
 //! comma-separated; default 0,-1).
 
 use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
@@ -18,6 +18,9 @@ fn main() {
     }
     if let Some(s) = args.get(3) {
         cfg.pos_iters = s.parse().unwrap();
+    }
+    if let Ok(v) = std::env::var("LINK_PATCH_ITERS") {
+        cfg.link_patch_iters = v.parse().unwrap();
     }
     if let Ok(v) = std::env::var("GRASP_HEIGHT") {
         cfg.grasp_height = v.parse().unwrap();

@@ -253,9 +253,9 @@ struct RowCache {
     tangents: [Vec3; 2],
     /// Inverse effective mass along the normal, tangent 1 and tangent 2 [1/kg].
     k: [f32; 3],
-    /// For a row on an articulation link: what a unit impulse along the normal, tangent 1 and tangent 2
-    /// does to every body it moves (None: a row between rigid bodies, or more link bodies than
-    /// [`LINK_DIR_BODIES`] holds; those go through [`Step::apply`]).
+    /// In an articulated substep: what a unit impulse along the normal, tangent 1 and tangent 2 does to
+    /// every body it moves, and the angular parts of the velocity Jacobians (None: no articulation, or
+    /// more link bodies than [`LINK_DIR_BODIES`] holds; those go through [`Step::apply`], as solver.wgsl).
     link: Option<[LinkDir; 3]>,
 }
 
@@ -267,8 +267,20 @@ const LINK_DIR_BODIES: usize = 4;
 /// (an impulse on one finger moves the arm, so the other finger too). [`Step::apply`] computes the same
 /// per impulse from the K blocks (a 6 x 6 product per link body and side); the finger pads' rows are swept
 /// `link_patch_iters` times per sweep, and that product was half of an articulated step (perf, 2026-12-04).
+/// In an articulated step the rows between rigid bodies (the nut on the thread) keep one too, with the
+/// direction's Jacobian and effective mass: a Screw env step 1.25-1.28x faster than recomputing lever
+/// products and dividing per impulse (docs/BENCHMARKS.md, 2026-12-04). Rigid-only steps keep the lever
+/// form, which solver.wgsl mirrors.
 #[derive(Clone, Copy, Debug, Default)]
 struct LinkDir {
+    /// The direction d (world frame) and its angular Jacobians on a and b: ra x d and rb x d [m], so the
+    /// relative velocity along d is (va - vb) . d + wa . (ra x d) - wb . (rb x d) (two dot products per
+    /// side where the lever form takes a cross product more).
+    d: Vec3,
+    jac: [Vec3; 2],
+    /// Effective mass along d [kg] (the inverse of the row's k, 0 where k is not positive): a product per
+    /// impulse where the lever form divides.
+    mass: f32,
     /// (body, twist change [m/s, rad/s] per N s), the first `moved_len` used.
     moved: [(u32, [Vec3; 2]); LINK_DIR_BODIES],
     moved_len: u8,
@@ -278,7 +290,15 @@ struct LinkDir {
 }
 
 impl LinkDir {
+    /// The relative velocity of row sides `a` and `b` along the direction [m/s].
+    #[inline]
+    fn rel(&self, vel: &Vels, a: usize, b: usize) -> f32 {
+        let (va, vb) = (&vel.v[a], &vel.v[b]);
+        (va[0] - vb[0]).dot(self.d) + va[1].dot(self.jac[0]) - vb[1].dot(self.jac[1])
+    }
+
     /// Applies `x` [N s] along the direction: the bodies' twists and the slots' spatial impulses.
+    #[inline]
     fn apply(&self, vel: &mut Vels, x: f32) {
         for (body, dv) in &self.moved[..self.moved_len as usize] {
             let v = &mut vel.v[*body as usize];
@@ -792,15 +812,18 @@ impl Step<'_> {
         k
     }
 
-    /// The [`LinkDir`] of a row along unit `d` (None when the row touches no link body or the
-    /// articulation has more link bodies than it holds).
+    /// The [`LinkDir`] of a row along unit `d` in an articulated substep, for rows between rigid bodies
+    /// too (their impulses then skip [`Step::apply`]'s per-impulse inertia products); None without an
+    /// articulation response, or when the row touches a link and the articulation has more link bodies
+    /// than a [`LinkDir`] holds.
     fn link_dir(&self, r: &Row, l: &Lever, d: Vec3) -> Option<LinkDir> {
         let resp = self.links.as_ref()?;
         let sides = self.link_impulses(r, l, d);
-        if sides.iter().all(Option::is_none) || self.link_bodies.len() + 2 > LINK_DIR_BODIES {
+        let on_link = sides.iter().any(Option::is_some);
+        if on_link && self.link_bodies.len() + 2 > LINK_DIR_BODIES {
             return None;
         }
-        let mut out = LinkDir::default();
+        let mut out = LinkDir { d, jac: [l.ra.cross(d), l.rb.cross(d)], ..LinkDir::default() };
         let mut push = |body: usize, dv: [Vec3; 2]| {
             out.moved[out.moved_len as usize] = (body as u32, dv);
             out.moved_len += 1;
@@ -811,7 +834,9 @@ impl Step<'_> {
         if self.inv_m(r.b) > 0.0 {
             push(r.b, [-self.inv_m(r.b) * d, -(l.ib * l.rb.cross(d))]);
         }
-        for (s, &body) in self.link_bodies.iter().enumerate() {
+        // A row between rigid bodies moves no link.
+        let link_bodies = if on_link { self.link_bodies } else { &[] };
+        for (s, &body) in link_bodies.iter().enumerate() {
             let mut dv = [Vec3::ZERO; 2];
             for (t, phi) in sides.iter().flatten() {
                 let r = resp.response(s, *t, *phi);
@@ -918,9 +943,12 @@ fn solve_row(
         let t1 = n.any_orthonormal_vector();
         let t2 = n.cross(t1);
         let k = [ctx.eff(r, &lever, n), ctx.eff(r, &lever, t1), ctx.eff(r, &lever, t2)];
-        let link = ctx
+        let mut link = ctx
             .link_dir(r, &lever, n)
             .and_then(|dn| Some([dn, ctx.link_dir(r, &lever, t1)?, ctx.link_dir(r, &lever, t2)?]));
+        for (dir, k) in link.iter_mut().flatten().zip(k) {
+            dir.mass = if k > 0.0 { 1.0 / k } else { 0.0 };
+        }
         r.cache = Some(RowCache { lever, tangents: [t1, t2], k, link });
     }
     let Some(c) = r.cache.as_ref() else { return };
@@ -940,8 +968,11 @@ fn solve_row(
     } else {
         0.0
     };
-    let vn = rel(vel).dot(n);
-    let new = (r.lambda_n + (target - vn) / k).max(0.0);
+    let dn = match &c.link {
+        Some(dirs) => (target - dirs[0].rel(vel, a, b)) * dirs[0].mass,
+        None => (target - rel(vel).dot(n)) / k,
+    };
+    let new = (r.lambda_n + dn).max(0.0);
     let d = new - r.lambda_n;
     r.lambda_n = new;
     match &c.link {
@@ -962,8 +993,11 @@ fn solve_row(
             if kt <= 0.0 {
                 continue;
             }
-            let vt = rel(vel).dot(t);
-            let new = (r.lambda_t[j] - vt / kt).clamp(-limit, limit);
+            let dt = match &c.link {
+                Some(dirs) => -dirs[1 + j].rel(vel, a, b) * dirs[1 + j].mass,
+                None => -rel(vel).dot(t) / kt,
+            };
+            let new = (r.lambda_t[j] + dt).clamp(-limit, limit);
             let d = new - r.lambda_t[j];
             r.lambda_t[j] = new;
             match &c.link {
