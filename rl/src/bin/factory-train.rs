@@ -1,7 +1,7 @@
 //! `factory-train --config configs/screw.toml [--set key=value]... [--seed S] [--envs N] [--updates N]
 //! [--resume RUN_DIR] [--run-dir DIR] [--json]`: PPO training with a progress bar, metrics.csv and
 //! TensorBoard event files in the run folder, atomic checkpoints every `train.checkpoint_every` updates,
-//! Ctrl-C saving and exiting cleanly, and the final policy exported to `policy.json`.
+//! Ctrl-C (or SIGTERM, SIGHUP) saving and exiting cleanly, and the final policy exported to `policy.json`.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -102,7 +102,16 @@ fn main() -> Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
-        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+        // Ctrl-C, and SIGTERM / SIGHUP (a cluster's scheduler preempting the job, a closed terminal): finish
+        // the update, save, exit. A second signal exits at once; the last checkpoint is whole (atomic).
+        ctrlc::set_handler(move || {
+            if stop.swap(true, Ordering::SeqCst) {
+                eprintln!("second interrupt: exiting now; the last checkpoint is kept");
+                std::process::exit(130);
+            }
+            eprintln!("interrupt: saving after this update (again to exit now)");
+        })
+        .context("installing the Ctrl-C / SIGTERM handler")?;
     }
     let total = trainer.cfg.train.updates;
     let bar = if args.json {
