@@ -1,4 +1,6 @@
-//! Evaluating an exported policy: deterministic actions (the Gaussian's mean). Each world contributes the
+//! Evaluating an exported policy: deterministic actions (the Gaussian's mean, as rl_games' player and the
+//! paper's tables), or sampled ones (`noise_seed`: the policy as it acts in training, whose episodes the
+//! trainer's success rate counts; the two can differ a lot). Each world contributes the
 //! same number of consecutive episodes (`episodes / env_count`, the remainder spread over the first worlds),
 //! so short episodes (often the successful ones) are not over-counted as they would be by taking the first
 //! `episodes` to end.
@@ -8,12 +10,16 @@ use factory_envs::{Env, StepBuffers};
 
 use crate::model::{to_vec, ActorCritic};
 use crate::normalizer::RunningMeanStd;
+use crate::ppo::normal;
+use factory_engine::rng::SplitMix64;
 
 /// The columns of the paper's Tables IV and X-XII that an env reports.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct EvalReport {
     /// Episodes evaluated.
     pub episodes: usize,
+    /// Whether actions were sampled (`mean + sigma * noise`) instead of the mean.
+    pub stochastic: bool,
     /// Fraction that ended in success.
     pub success_rate: f64,
     /// Mean env steps of the successful episodes (NaN when none succeeded).
@@ -46,7 +52,9 @@ impl ForceTrace {
     }
 }
 
-/// Runs `env` with the deterministic policy until every world has ended its quota of episodes.
+/// Runs `env` with the policy until every world has ended its quota of episodes: the mean action, or with
+/// `noise_seed` actions sampled with the policy's sigma from that seed.
+#[allow(clippy::too_many_arguments)]
 pub fn evaluate(
     env: &mut dyn Env,
     model: &ActorCritic,
@@ -55,6 +63,7 @@ pub fn evaluate(
     episodes: usize,
     device: &Device,
     mut forces: Option<&mut ForceTrace>,
+    noise_seed: Option<u64>,
 ) -> EvalReport {
     let spec = env.spec().clone();
     let (n, d) = (spec.env_count, spec.observation_dim());
@@ -66,6 +75,7 @@ pub fn evaluate(
     let mut ended = vec![0usize; n];
     let (mut done, mut succ, mut steps_succ, mut ret_sum) = (0usize, 0usize, 0u64, 0.0f64);
     let (mut torque_sum, mut torque_count) = (0.0f64, 0u64);
+    let mut noise = noise_seed.map(|seed| (SplitMix64(seed), model.log_std.val().exp().unsqueeze_dim::<2>(0)));
     while done < episodes {
         let o = Tensor::<1>::from_floats(buf.observation.as_slice(), device).reshape([n, d]);
         let o = match norm {
@@ -73,6 +83,14 @@ pub fn evaluate(
             None => o,
         };
         let (mu, _) = model.forward(o);
+        let a_dim = spec.action_dim();
+        let mu = match noise.as_mut() {
+            Some((rng, std)) => {
+                let eps = Tensor::<1>::from_floats(normal(rng, n * a_dim).as_slice(), device).reshape([n, a_dim]);
+                mu + eps * std.clone()
+            }
+            None => mu,
+        };
         let action = to_vec(mu.clamp(-1.0, 1.0));
         env.step(&action, &mut buf);
         if let Some(d) = env.diagnostics() {
@@ -105,6 +123,7 @@ pub fn evaluate(
     }
     EvalReport {
         episodes: done,
+        stochastic: noise_seed.is_some(),
         success_rate: succ as f64 / done as f64,
         mean_steps_to_success: if succ > 0 { steps_succ as f64 / succ as f64 } else { f64::NAN },
         mean_return: ret_sum / done as f64,

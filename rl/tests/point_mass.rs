@@ -31,7 +31,7 @@ fn ppo_learns_point_mass_reaching() {
         let (model, norm) = p.build(&Device::flex(), &path).unwrap();
         let mut env = factory_envs::build(&p.env_config, 128, 999).unwrap();
         std::fs::remove_dir_all(&dir).ok();
-        evaluate(env.as_mut(), &model, norm.as_ref(), p.observation_clip, 1024, &Device::flex(), None)
+        evaluate(env.as_mut(), &model, norm.as_ref(), p.observation_clip, 1024, &Device::flex(), None, None)
     };
     assert!(untrained.success_rate < 0.3, "the untrained policy already succeeds: {untrained:?}");
     let mut last = None;
@@ -49,7 +49,7 @@ fn ppo_learns_point_mass_reaching() {
     let (model, norm) = policy.build(&device, &policy_path).unwrap();
     let mut env = factory_envs::build(&policy.env_config, 128, 999).unwrap();
     policy.check_spec(env.spec(), &policy_path).unwrap();
-    let report = evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, 1024, &device, None);
+    let report = evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, 1024, &device, None, None);
     eprintln!("untrained: {untrained:?}");
     eprintln!(
         "after {updates} updates ({} env steps): training success {:.3}, eval {report:?}",
@@ -57,6 +57,16 @@ fn ppo_learns_point_mass_reaching() {
     );
     assert_eq!(report.episodes, 1024);
     assert!(report.success_rate > 0.95, "evaluation success {:.3} <= 0.95", report.success_rate);
+    // Sampled actions (`factory-eval --stochastic`): the noise acts, and the same seed repeats the run.
+    let sampled = |seed| {
+        let mut env = factory_envs::build(&policy.env_config, 128, 999).unwrap();
+        evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, 1024, &device, None, Some(seed))
+    };
+    let (s1, s2) = (sampled(5), sampled(5));
+    eprintln!("sampled actions: {s1:?}");
+    assert!(s1.stochastic && !report.stochastic);
+    assert_ne!(s1.mean_return, report.mean_return, "sampling left the episodes as the mean's");
+    assert_eq!((s1.success_rate, s1.mean_return), (s2.success_rate, s2.mean_return));
     std::fs::remove_dir_all(&dir).ok();
 }
 

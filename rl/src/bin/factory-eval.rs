@@ -1,5 +1,6 @@
-//! `factory-eval --policy FILE [--episodes 1024] [--envs 128] [--config FILE] [--seed S] [--json]`: runs an
-//! exported policy deterministically and reports the columns of the paper's Tables IV and X-XII (success
+//! `factory-eval --policy FILE [--episodes 1024] [--envs 128] [--config FILE] [--seed S] [--stochastic]
+//! [--json]`: runs an exported policy (its mean action; `--stochastic` samples with its sigma, as training
+//! does) and reports the columns of the paper's Tables IV and X-XII (success
 //! rate, mean env steps to success). The env is rebuilt from the policy file's own env config, or from
 //! `--config`'s `[env]` (refused, showing both specs, if it does not match what the policy was trained on).
 
@@ -32,6 +33,10 @@ struct Args {
     /// Write world 0's per-step contact-force norms at the fingers, nut and bolt (CSV; envs that measure them).
     #[arg(long, value_name = "FILE")]
     forces_csv: Option<PathBuf>,
+    /// Sample actions with the policy's sigma (noise drawn from --seed), as in training, instead of its
+    /// mean (the default, as rl_games' player and the paper's tables).
+    #[arg(long)]
+    stochastic: bool,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -57,6 +62,7 @@ fn main() -> Result<()> {
         args.episodes,
         &device,
         args.forces_csv.as_ref().map(|_| &mut trace),
+        args.stochastic.then_some(args.seed),
     );
     if let Some(path) = &args.forces_csv {
         factory_rl::checkpoint::write_atomic(path, trace.to_csv().as_bytes())?;
@@ -65,9 +71,10 @@ fn main() -> Result<()> {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         println!(
-            "{}: {} episodes, success {:.1}%, mean steps to success {:.1}, mean return {:.3}, mean joint torque \
+            "{} ({} actions): {} episodes, success {:.1}%, mean steps to success {:.1}, mean return {:.3}, mean joint torque \
              norm {:.2} N m",
             policy.env,
+            if report.stochastic { "sampled" } else { "mean" },
             report.episodes,
             100.0 * report.success_rate,
             report.mean_steps_to_success,
