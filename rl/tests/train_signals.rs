@@ -31,7 +31,8 @@ fn sigterm_saves_the_run_and_resume_continues_it() {
         assert!(child.try_wait().unwrap().is_none(), "factory-train exited before the signal");
         std::thread::sleep(Duration::from_millis(50));
     }
-    let status = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill runs");
+    // The shell's built-in kill (a fresh machine may have no kill executable).
+    let status = Command::new("sh").args(["-c", &format!("kill -TERM {}", child.id())]).status().expect("sh runs");
     assert!(status.success());
     let out = child.wait_with_output().expect("factory-train exits");
     let stderr = String::from_utf8_lossy(&out.stderr);
