@@ -13,12 +13,14 @@
 //! hand (IsaacGymEnvs; or on the first thread, `start_engaged`), gripped with the fingertip at its bottom; the
 //! observation is the fingertip's pose and twist and the nut's centre-of-mass pose and twist (26; plus the
 //! finger contact forces (6) and the previous action (12) when asked, the paper's observation ablation);
-//! the reward is `-(nut-to-target keypoint distance + fingertip-to-nut keypoint distance)`, each the sum over
+//! the reward is `-(nut-to-target keypoint distance + pads-to-nut keypoint distance)`, each the sum over
 //! 4 points spaced along a 0.112071 m segment (the hand plus finger length) rising from the body along its
-//! axis; success when the nut's centre of mass is within one thread pitch of its seated position (episode
-//! terminated); failure (terminated) when it is more than `far_error` from it, has slipped from the
-//! fingers (farther from the fingertip than half the pad length plus half the nut height) or fallen off
-//! the bolt, or the world diverged; truncated after `max_episode_steps`.
+//! axis, the pads' segment from the midpoint between the finger pads' centres ([`pad_midpoint`], half a pad
+//! above the fingertip: IsaacGymEnvs' `fingerpad_midpoint_pos`); success when the nut's centre of mass is
+//! within one thread pitch of its seated position (episode terminated); failure (terminated) when it is
+//! more than `far_error` from it, has slipped from the fingers (its centre of mass farther from the pads'
+//! midpoint than half the pad length plus half the nut height) or fallen off the bolt, or the world
+//! diverged; truncated after `max_episode_steps`.
 
 use factory_controllers::rotation::{pose_error, JacobianKind};
 use factory_controllers::{build, linalg, ArmBatch, Controller, ControllerConfig, Targets};
@@ -262,6 +264,16 @@ pub enum Outcome {
     Failure,
 }
 
+/// The midpoint between the finger pads' centres [m]: half a pad length up the fingers from the fingertip
+/// frame (whose z points out of the hand). IsaacGymEnvs' `fingerpad_midpoint_pos` (the fingers' midpoint
+/// moved `finger_length - fingerpad_length / 2` along the hand's z); its Screw reward and slip test measure
+/// the nut from here. Measured from the fingertip instead, a grasp at the nut's bottom (Factory's) was
+/// 7.4 mm short of the nut's centre and the reward pulled the hand up the nut (the mean action of a
+/// 208-update policy lifted the nut off the bolt's tip, 2026-12-04).
+pub fn pad_midpoint(tip_pos: Vec3, tip_quat: Quat) -> Vec3 {
+    tip_pos + tip_quat * -Vec3::Z * (0.5 * FINGERPAD_LENGTH)
+}
+
 /// Four keypoints spaced along the segment from `p` along `axis` by [`KEYPOINT_AXIS`].
 fn keypoints(p: Vec3, axis: Vec3) -> [Vec3; 4] {
     [0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0].map(|t| p + axis * (t * KEYPOINT_AXIS))
@@ -312,9 +324,9 @@ impl NutBoltTask for Screw {
     fn reward(&self, v: &WorldView) -> f32 {
         let nut_kp = keypoints(v.nut_com, v.nut_quat * Vec3::Z);
         let target_kp = keypoints(self.target, Vec3::Z);
-        // The fingertip's z points down, out of the hand: its segment rises along -z.
-        let tip_kp = keypoints(v.tip_pos, v.tip_quat * -Vec3::Z);
-        -(keypoint_distance(nut_kp, target_kp) + keypoint_distance(nut_kp, tip_kp))
+        // The fingertip's z points down, out of the hand: the pads' segment rises along -z.
+        let pads_kp = keypoints(pad_midpoint(v.tip_pos, v.tip_quat), v.tip_quat * -Vec3::Z);
+        -(keypoint_distance(nut_kp, target_kp) + keypoint_distance(nut_kp, pads_kp))
     }
 
     fn outcome(&self, v: &WorldView) -> Outcome {
@@ -323,7 +335,8 @@ impl NutBoltTask for Screw {
             return Outcome::Success;
         }
         let far = to_target > self.far_error;
-        let slipped = v.nut_com.distance(v.tip_pos) > 0.5 * FINGERPAD_LENGTH + 0.5 * self.nut_height;
+        let pads = pad_midpoint(v.tip_pos, v.tip_quat);
+        let slipped = v.nut_com.distance(pads) > 0.5 * FINGERPAD_LENGTH + 0.5 * self.nut_height;
         let off_axis = Vec3::new(v.nut_com.x, v.nut_com.y, 0.0).length() > 0.5 * self.bolt_diameter;
         let fallen = off_axis && v.nut_com.z < self.bolt_top + 0.5 * self.nut_height;
         if far || slipped || fallen {
@@ -814,5 +827,54 @@ impl Env for FrankaNutBolt {
             arm
         };
         self.observe(&arm, &mut out.observation);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Regression: the Screw reward and slip test measured the nut from the fingertip, not from the pads'
+    /// midpoint (IsaacGymEnvs), so a grasp at the nut's bottom was rewarded for sliding the hand up.
+    #[test]
+    fn the_screw_reward_and_slip_test_measure_the_nut_from_the_pads_midpoint() {
+        let nut_height = 0.0148;
+        let task = Screw {
+            target: Vec3::new(0.0, 0.0, 0.02),
+            pitch: 0.002,
+            nut_height,
+            bolt_diameter: 0.016,
+            bolt_top: 0.05,
+            far_error: 0.1,
+        };
+        // The hand points down: the fingertip frame's z is the world's -z.
+        let tip_quat = Quat::from_rotation_x(std::f32::consts::PI);
+        let view = |tip: Vec3| WorldView {
+            tip_pos: tip,
+            tip_quat,
+            tip_linvel: Vec3::ZERO,
+            tip_angvel: Vec3::ZERO,
+            nut_com: task.target,
+            nut_quat: Quat::IDENTITY,
+            nut_linvel: Vec3::ZERO,
+            nut_angvel: Vec3::ZERO,
+            nut_frame: Vec3::ZERO,
+        };
+        let half_pad = 0.5 * FINGERPAD_LENGTH;
+        // The pads' centres level with the nut's centre of mass, which is at its target: no distance left.
+        let level = task.target - Vec3::Z * half_pad;
+        assert!((pad_midpoint(level, tip_quat) - task.target).length() < 1e-7);
+        assert!(task.reward(&view(level)).abs() < 1e-6, "{}", task.reward(&view(level)));
+        // The fingertip at the nut's centre puts the pads half a pad above it: 4 keypoints x half a pad.
+        let r = task.reward(&view(task.target));
+        assert!((r + 4.0 * half_pad).abs() < 1e-6, "{r}");
+        // Slip: the nut's centre farther than half a pad plus half the nut from the pads' midpoint (the
+        // nut 5 cm above its target: neither seated nor far).
+        let limit = half_pad + 0.5 * nut_height;
+        let above = Screw { target: task.target - Vec3::Z * 0.05, ..task.clone() };
+        let at = |d: f32| above.outcome(&view(level + Vec3::Z * d));
+        assert_eq!(at(limit - 1e-4), Outcome::Running);
+        assert_eq!(at(limit + 1e-4), Outcome::Failure);
+        assert_eq!(at(-(limit - 1e-4)), Outcome::Running);
     }
 }
