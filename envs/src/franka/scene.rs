@@ -36,6 +36,7 @@ pub fn franka_urdf() -> std::result::Result<UrdfModel, factory_engine::EngineErr
     let path = std::path::Path::new(FRANKA_URDF);
     parse_urdf(FRANKA_URDF_TEXT, path, path.parent().unwrap_or(std::path::Path::new("")))
 }
+
 /// Factory's Screw reset pose (IsaacGymEnvs FactoryTaskNutBoltScrew): the hand points down over the bolt;
 /// fingers open.
 pub const Q_START: [f32; 9] = [1.5178e-3, -0.19651, -1.4364e-3, -1.9761, -2.7717e-4, 1.7796, 0.78556, 0.04, 0.04];
