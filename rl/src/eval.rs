@@ -31,16 +31,29 @@ pub struct EvalReport {
     pub mean_joint_torque_norm: f64,
 }
 
-/// World 0's contact-force norms at every evaluation step (the data of the paper's Fig. S17).
+/// Named values of world 0 at every evaluation step: its contact-force norms (the data of the paper's Fig.
+/// S17) or its observation, action, reward and flags (what the policy saw and did).
 #[derive(Clone, Debug, Default)]
-pub struct ForceTrace {
-    /// Column names after `step` (`left_finger`, `right_finger`, `bolt`, `nut`, ...).
+pub struct Trace {
+    /// Column names after `step` (`left_finger`, `bolt`, ...; `nut_pos_m_z`, `action_drot_z`, ...).
     pub names: Vec<String>,
-    /// One row per step: the norms [N] in `names`' order.
+    /// One row per step, in `names`' order.
     pub rows: Vec<Vec<f32>>,
 }
 
-impl ForceTrace {
+/// What [`evaluate`] does besides the report.
+#[derive(Debug, Default)]
+pub struct EvalOptions<'a> {
+    /// Sample actions with the policy's sigma, the noise drawn from this seed (None: the mean action).
+    pub noise_seed: Option<u64>,
+    /// Fills world 0's contact-force norms [N] per step (envs that measure them).
+    pub forces: Option<&'a mut Trace>,
+    /// Fills world 0's observation (the step's input), action (clipped to [-1, 1]), reward and
+    /// terminated / truncated / success flags per step.
+    pub steps: Option<&'a mut Trace>,
+}
+
+impl Trace {
     /// The trace as CSV (`step,name,...`).
     pub fn to_csv(&self) -> String {
         let mut s = format!("step,{}\n", self.names.join(","));
@@ -52,9 +65,8 @@ impl ForceTrace {
     }
 }
 
-/// Runs `env` with the policy until every world has ended its quota of episodes: the mean action, or with
-/// `noise_seed` actions sampled with the policy's sigma from that seed.
-#[allow(clippy::too_many_arguments)]
+/// Runs `env` with the policy until every world has ended its quota of episodes: the mean action, or
+/// actions sampled with the policy's sigma (`opts.noise_seed`).
 pub fn evaluate(
     env: &mut dyn Env,
     model: &ActorCritic,
@@ -62,10 +74,15 @@ pub fn evaluate(
     clip: f32,
     episodes: usize,
     device: &Device,
-    mut forces: Option<&mut ForceTrace>,
-    noise_seed: Option<u64>,
+    opts: EvalOptions<'_>,
 ) -> EvalReport {
+    let EvalOptions { noise_seed, mut forces, mut steps } = opts;
     let spec = env.spec().clone();
+    if let Some(t) = steps.as_deref_mut() {
+        t.names = spec.observation_names.clone();
+        t.names.extend(spec.action_names.iter().map(|a| format!("action_{a}")));
+        t.names.extend(["reward", "terminated", "truncated", "success"].map(String::from));
+    }
     let (n, d) = (spec.env_count, spec.observation_dim());
     let mut buf = StepBuffers::new(&spec);
     env.reset(&mut buf);
@@ -92,7 +109,12 @@ pub fn evaluate(
             None => mu,
         };
         let action = to_vec(mu.clamp(-1.0, 1.0));
+        let mut row = steps.is_some().then(|| [&buf.observation[..d], &action[..spec.action_dim()]].concat());
         env.step(&action, &mut buf);
+        if let (Some(t), Some(mut r)) = (steps.as_deref_mut(), row.take()) {
+            r.extend([buf.reward[0], buf.terminated[0], buf.truncated[0], buf.success[0]]);
+            t.rows.push(r);
+        }
         if let Some(d) = env.diagnostics() {
             torque_sum += d.joint_torque_norm.iter().map(|&t| t as f64).sum::<f64>();
             torque_count += d.joint_torque_norm.len() as u64;

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use burn::tensor::Device;
 use factory_rl::checkpoint::PolicyFile;
-use factory_rl::eval::evaluate;
+use factory_rl::eval::{evaluate, EvalOptions, Trace};
 use factory_rl::train::Trainer;
 use factory_rl::TrainConfig;
 
@@ -31,7 +31,7 @@ fn ppo_learns_point_mass_reaching() {
         let (model, norm) = p.build(&Device::flex(), &path).unwrap();
         let mut env = factory_envs::build(&p.env_config, 128, 999).unwrap();
         std::fs::remove_dir_all(&dir).ok();
-        evaluate(env.as_mut(), &model, norm.as_ref(), p.observation_clip, 1024, &Device::flex(), None, None)
+        evaluate(env.as_mut(), &model, norm.as_ref(), p.observation_clip, 1024, &Device::flex(), Default::default())
     };
     assert!(untrained.success_rate < 0.3, "the untrained policy already succeeds: {untrained:?}");
     let mut last = None;
@@ -49,7 +49,8 @@ fn ppo_learns_point_mass_reaching() {
     let (model, norm) = policy.build(&device, &policy_path).unwrap();
     let mut env = factory_envs::build(&policy.env_config, 128, 999).unwrap();
     policy.check_spec(env.spec(), &policy_path).unwrap();
-    let report = evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, 1024, &device, None, None);
+    let report =
+        evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, 1024, &device, Default::default());
     eprintln!("untrained: {untrained:?}");
     eprintln!(
         "after {updates} updates ({} env steps): training success {:.3}, eval {report:?}",
@@ -60,13 +61,31 @@ fn ppo_learns_point_mass_reaching() {
     // Sampled actions (`factory-eval --stochastic`): the noise acts, and the same seed repeats the run.
     let sampled = |seed| {
         let mut env = factory_envs::build(&policy.env_config, 128, 999).unwrap();
-        evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, 1024, &device, None, Some(seed))
+        let opts = EvalOptions { noise_seed: Some(seed), ..Default::default() };
+        evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, 1024, &device, opts)
     };
     let (s1, s2) = (sampled(5), sampled(5));
     eprintln!("sampled actions: {s1:?}");
     assert!(s1.stochastic && !report.stochastic);
     assert_ne!(s1.mean_return, report.mean_return, "sampling left the episodes as the mean's");
     assert_eq!((s1.success_rate, s1.mean_return), (s2.success_rate, s2.mean_return));
+    // The per-step trace (`factory-eval --steps-csv`): world 0's observation, action, reward and flags; tracing
+    // changes nothing, the first row starts from the reset, and world 0 ends at least its quota of episodes.
+    let mut steps = Trace::default();
+    let mut env = factory_envs::build(&policy.env_config, 128, 999).unwrap();
+    let opts = EvalOptions { steps: Some(&mut steps), ..Default::default() };
+    let traced = evaluate(env.as_mut(), &model, norm.as_ref(), policy.observation_clip, 1024, &device, opts);
+    assert_eq!((traced.success_rate, traced.mean_return), (report.success_rate, report.mean_return));
+    let (od, ad) = (env.spec().observation_dim(), env.spec().action_dim());
+    assert_eq!(steps.names.len(), od + ad + 4);
+    assert_eq!(steps.names[od], format!("action_{}", env.spec().action_names[0]));
+    assert!(steps.rows.iter().all(|r| r.len() == od + ad + 4 && r[od..od + ad].iter().all(|a| a.abs() <= 1.0)));
+    let ends = steps.rows.iter().filter(|r| r[od + ad + 1] != 0.0 || r[od + ad + 2] != 0.0).count();
+    assert!(ends >= 1024 / 128, "world 0 ended {ends} episodes");
+    let mut fresh = factory_envs::build(&policy.env_config, 128, 999).unwrap();
+    let mut first = factory_envs::StepBuffers::new(fresh.spec());
+    fresh.reset(&mut first);
+    assert_eq!(&steps.rows[0][..od], &first.observation[..od]);
     std::fs::remove_dir_all(&dir).ok();
 }
 

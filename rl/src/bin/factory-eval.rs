@@ -1,5 +1,5 @@
 //! `factory-eval --policy FILE [--episodes 1024] [--envs 128] [--config FILE] [--seed S] [--stochastic]
-//! [--json]`: runs an exported policy (its mean action; `--stochastic` samples with its sigma, as training
+//! [--forces-csv FILE] [--steps-csv FILE] [--json]`: runs an exported policy (its mean action; `--stochastic` samples with its sigma, as training
 //! does) and reports the columns of the paper's Tables IV and X-XII (success
 //! rate, mean env steps to success). The env is rebuilt from the policy file's own env config, or from
 //! `--config`'s `[env]` (refused, showing both specs, if it does not match what the policy was trained on).
@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Parser;
 use factory_rl::checkpoint::PolicyFile;
-use factory_rl::eval::{evaluate, ForceTrace};
+use factory_rl::eval::{evaluate, EvalOptions, Trace};
 use factory_rl::TrainConfig;
 
 #[derive(Parser, Debug)]
@@ -33,6 +33,9 @@ struct Args {
     /// Write world 0's per-step contact-force norms at the fingers, nut and bolt (CSV; envs that measure them).
     #[arg(long, value_name = "FILE")]
     forces_csv: Option<PathBuf>,
+    /// Write world 0's observation, action, reward and done flags at every step (CSV, named columns).
+    #[arg(long, value_name = "FILE")]
+    steps_csv: Option<PathBuf>,
     /// Sample actions with the policy's sigma (noise drawn from --seed), as in training, instead of its
     /// mean (the default, as rl_games' player and the paper's tables).
     #[arg(long)]
@@ -53,7 +56,7 @@ fn main() -> Result<()> {
     policy.check_spec(env.spec(), &args.policy)?;
     let device = burn::tensor::Device::flex();
     let (model, norm) = policy.build(&device, &args.policy)?;
-    let mut trace = ForceTrace::default();
+    let (mut trace, mut steps) = (Trace::default(), Trace::default());
     let report = evaluate(
         env.as_mut(),
         &model,
@@ -61,11 +64,17 @@ fn main() -> Result<()> {
         policy.observation_clip,
         args.episodes,
         &device,
-        args.forces_csv.as_ref().map(|_| &mut trace),
-        args.stochastic.then_some(args.seed),
+        EvalOptions {
+            noise_seed: args.stochastic.then_some(args.seed),
+            forces: args.forces_csv.as_ref().map(|_| &mut trace),
+            steps: args.steps_csv.as_ref().map(|_| &mut steps),
+        },
     );
     if let Some(path) = &args.forces_csv {
         factory_rl::checkpoint::write_atomic(path, trace.to_csv().as_bytes())?;
+    }
+    if let Some(path) = &args.steps_csv {
+        factory_rl::checkpoint::write_atomic(path, steps.to_csv().as_bytes())?;
     }
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
