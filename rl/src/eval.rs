@@ -10,7 +10,7 @@ use factory_envs::{Env, StepBuffers};
 
 use crate::model::{to_vec, ActorCritic};
 use crate::normalizer::RunningMeanStd;
-use crate::ppo::normal;
+use crate::ppo::normal_tensor;
 use factory_engine::rng::SplitMix64;
 
 /// The columns of the paper's Tables IV and X-XII that an env reports.
@@ -83,7 +83,7 @@ pub fn evaluate(
         t.names.extend(spec.action_names.iter().map(|a| format!("action_{a}")));
         t.names.extend(["reward", "terminated", "truncated", "success"].map(String::from));
     }
-    let (n, d) = (spec.env_count, spec.observation_dim());
+    let (n, d, a_dim) = (spec.env_count, spec.observation_dim(), spec.action_dim());
     let mut buf = StepBuffers::new(&spec);
     env.reset(&mut buf);
     let mut ret = vec![0.0f64; n];
@@ -100,18 +100,14 @@ pub fn evaluate(
             None => o,
         };
         let (mu, _) = model.forward(o);
-        let a_dim = spec.action_dim();
         let mu = match noise.as_mut() {
-            Some((rng, std)) => {
-                let eps = Tensor::<1>::from_floats(normal(rng, n * a_dim).as_slice(), device).reshape([n, a_dim]);
-                mu + eps * std.clone()
-            }
+            Some((rng, std)) => mu + normal_tensor(rng, n, a_dim, device) * std.clone(),
             None => mu,
         };
         let action = to_vec(mu.clamp(-1.0, 1.0));
-        let mut row = steps.is_some().then(|| [&buf.observation[..d], &action[..spec.action_dim()]].concat());
+        let row = steps.is_some().then(|| [&buf.observation[..d], &action[..a_dim]].concat());
         env.step(&action, &mut buf);
-        if let (Some(t), Some(mut r)) = (steps.as_deref_mut(), row.take()) {
+        if let (Some(t), Some(mut r)) = (steps.as_deref_mut(), row) {
             r.extend([buf.reward[0], buf.terminated[0], buf.truncated[0], buf.success[0]]);
             t.rows.push(r);
         }

@@ -38,6 +38,11 @@ pub fn normal(rng: &mut SplitMix64, n: usize) -> Vec<f32> {
     out
 }
 
+/// A [rows, cols] tensor of [`normal`] draws on `device` (the exploration noise of a step's actions).
+pub fn normal_tensor(rng: &mut SplitMix64, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
+    Tensor::<1>::from_floats(normal(rng, rows * cols).as_slice(), device).reshape([rows, cols])
+}
+
 /// Episode bookkeeping on the host (the env is stepped from the host, so its flags are already here).
 #[derive(Clone, Debug, Default)]
 pub struct EpisodeTracker {
@@ -207,8 +212,7 @@ impl Ppo {
             let raw = Tensor::<1>::from_floats(buf.observation.as_slice(), &self.device).reshape([n, self.obs_dim]);
             let obs = self.normalize_obs(raw.clone());
             let (mu, v) = policy.forward(obs.clone());
-            let eps =
-                Tensor::<1>::from_floats(normal(&mut self.rng, n * a_dim).as_slice(), &self.device).reshape([n, a_dim]);
+            let eps = normal_tensor(&mut self.rng, n, a_dim, &self.device);
             let action = mu + eps.clone() * std.clone();
             let logp = eps.powi_scalar(2).sum_dim(1).flatten::<1>(0, 1).mul_scalar(-0.5).add_scalar(logp_const);
             // The one readback per step on a host env: the actions it must apply.
