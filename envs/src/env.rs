@@ -122,6 +122,17 @@ pub trait Env: Send {
         })
     }
 
+    /// Hook: sets each world's step count within its running episode (shape [env_count], each below
+    /// `max_episode_steps`), so the episode is truncated `max_episode_steps - steps[w]` steps from now unless
+    /// it ends sooner. The trainer uses it to start the worlds' episodes out of phase (rsl_rl's
+    /// `init_at_random_ep_len`). The default refuses: the env keeps no such counter.
+    fn set_episode_steps(&mut self, _steps: &[u32]) -> Result<()> {
+        Err(EnvError::InvalidValue {
+            field: "episode_steps",
+            reason: format!("env `{}` cannot set its episodes' step counts", self.spec().name),
+        })
+    }
+
     /// Checks `action`'s length against the spec; the trainer calls this once before rolling out.
     fn check_action_len(&self, len: usize) -> Result<()> {
         let spec = self.spec();
@@ -131,4 +142,18 @@ pub trait Env: Send {
         }
         Ok(())
     }
+}
+
+/// Checks a [`Env::set_episode_steps`] argument against `spec`: one count per world, each below the limit.
+pub fn check_episode_steps(spec: &EnvSpec, steps: &[u32]) -> Result<()> {
+    if steps.len() != spec.env_count {
+        return Err(EnvError::Shape { field: "episode_steps", len: steps.len(), expected: spec.env_count });
+    }
+    if let Some((w, s)) = steps.iter().enumerate().find(|(_, s)| **s >= spec.max_episode_steps) {
+        return Err(EnvError::InvalidValue {
+            field: "episode_steps",
+            reason: format!("world {w}: {s} steps, valid: below max_episode_steps = {}", spec.max_episode_steps),
+        });
+    }
+    Ok(())
 }

@@ -155,6 +155,12 @@ impl Env for PointMass {
         }
     }
 
+    fn set_episode_steps(&mut self, steps: &[u32]) -> Result<()> {
+        crate::env::check_episode_steps(&self.spec, steps)?;
+        self.world_steps.copy_from_slice(steps);
+        Ok(())
+    }
+
     fn save_state(&self) -> Option<Vec<u8>> {
         let mut b = self.rng.0.to_le_bytes().to_vec();
         for w in 0..self.spec.env_count {

@@ -116,11 +116,18 @@ pub struct TrainSection {
     pub updates: usize,
     /// Write a checkpoint every this many updates (and at the end, and on Ctrl-C).
     pub checkpoint_every: usize,
+    /// Control steps; 0 turns it off. Each world's first episode is cut short (truncated, its value
+    /// bootstrapped) after a uniform random 1..=N steps, so the worlds' later episodes run out of phase,
+    /// as rsl_rl's `init_at_random_ep_len`. Without it, every world of a task with no reset randomisation
+    /// and long episodes (Screw: ~2000 steps, 60 updates of horizon 32) is in the same phase at once, and
+    /// the learner sees the start of an episode only in a few updates per generation. At most the env's
+    /// `max_episode_steps`.
+    pub stagger_first_episodes: u32,
 }
 
 impl Default for TrainSection {
     fn default() -> Self {
-        Self { env_count: 128, updates: 1024, checkpoint_every: 50 }
+        Self { env_count: 128, updates: 1024, checkpoint_every: 50, stagger_first_episodes: 0 }
     }
 }
 

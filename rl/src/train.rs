@@ -5,6 +5,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use burn::prelude::*;
+use factory_engine::rng::SplitMix64;
 use factory_envs::{Env, StepBuffers};
 
 use crate::checkpoint::{self, PolicyFile};
@@ -27,6 +28,27 @@ pub fn resolve_device(choice: DeviceChoice) -> Result<(Device, &'static str)> {
             reason: "\"wgpu\" is not built in this version of factory-rl; valid: \"auto\", \"cpu\"".into(),
         }),
     }
+}
+
+/// Sets each world's episode step count so its first episode is truncated after a uniform random
+/// 1..=`stagger` steps (see `TrainSection::stagger_first_episodes`); 0 leaves the env as it is.
+fn stagger_first_episodes(env: &mut dyn Env, stagger: u32, seed: u64) -> Result<()> {
+    if stagger == 0 {
+        return Ok(());
+    }
+    let spec = env.spec();
+    let max = spec.max_episode_steps;
+    if stagger > max {
+        return Err(RlError::InvalidValue {
+            field: "train.stagger_first_episodes".into(),
+            reason: format!("{stagger} steps; valid: 0 (off) to the env's max_episode_steps = {max}"),
+        });
+    }
+    // A generator of its own, so the learner's noise and the env's draws are the same with or without it.
+    let mut rng = SplitMix64(seed ^ 0x57A6_6E12);
+    let steps: Vec<u32> = (0..spec.env_count).map(|_| max - 1 - (rng.next_u64() % stagger as u64) as u32).collect();
+    env.set_episode_steps(&steps)
+        .map_err(|e| RlError::InvalidValue { field: "train.stagger_first_episodes".into(), reason: e.to_string() })
 }
 
 /// What one update reports.
@@ -77,6 +99,7 @@ impl Trainer {
         let spec = env.spec().clone();
         let mut buf = StepBuffers::new(&spec);
         env.reset(&mut buf);
+        stagger_first_episodes(env.as_mut(), cfg.train.stagger_first_episodes, cfg.seed)?;
         let ppo = Ppo::new(&cfg.ppo, spec.env_count, spec.observation_dim(), spec.action_dim(), cfg.seed, device);
         Ok(Self {
             episodes: EpisodeTracker::new(spec.env_count),

@@ -167,3 +167,39 @@ fn failed_checkpoint_write_keeps_the_previous_one() {
     assert_eq!(leftovers, 0);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `train.stagger_first_episodes = N`: every world's first episode ends by step N, truncated (not
+/// terminated) unless it reached the goal, at spread-out steps, so the next episodes run out of phase; the
+/// learner's generator is untouched (the first rollout's observations are the unstaggered run's). A value
+/// beyond the env's time limit is refused naming the field.
+#[test]
+fn staggered_first_episodes_end_out_of_phase() {
+    let sets = ["train.env_count=64", "ppo.minibatch_size=64", "env.max_episode_steps=100"];
+    let plain = Trainer::new(config(&sets), Device::flex()).unwrap();
+    let mut t =
+        Trainer::new(config(&[&sets[..], &["train.stagger_first_episodes=20"]].concat()), Device::flex()).unwrap();
+    assert_eq!(plain.buf.observation, t.buf.observation);
+    let n = 64;
+    let mut first_end = vec![0u32; n];
+    let action = vec![0.0f32; n * 2];
+    for step in 1..=20u32 {
+        t.env.step(&action, &mut t.buf);
+        for w in 0..n {
+            if first_end[w] == 0 && t.buf.done(w) {
+                first_end[w] = step;
+                assert!(t.buf.truncated[w] == 1.0 || t.buf.success[w] == 1.0, "world {w} ended otherwise");
+            }
+        }
+    }
+    assert!(first_end.iter().all(|&s| s > 0), "all first episodes end within 20 steps: {first_end:?}");
+    let mut distinct = first_end.clone();
+    distinct.sort_unstable();
+    distinct.dedup();
+    assert!(distinct.len() >= 12, "end steps spread over 1..=20: {first_end:?}");
+
+    let e = Trainer::new(config(&[&sets[..], &["train.stagger_first_episodes=101"]].concat()), Device::flex())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("train.stagger_first_episodes") && e.contains("100"), "{e}");
+}

@@ -709,6 +709,12 @@ impl Env for FrankaNutBolt {
         Some(self.last_diagnostics.clone())
     }
 
+    fn set_episode_steps(&mut self, steps: &[u32]) -> Result<()> {
+        crate::env::check_episode_steps(&self.spec, steps)?;
+        self.world_steps.copy_from_slice(steps);
+        Ok(())
+    }
+
     fn save_state(&self) -> Option<Vec<u8>> {
         let sim = &self.scene.sim;
         let qd: Vec<f32> = sim.state.body_qd.iter().flat_map(|[v, w]| [v.x, v.y, v.z, w.x, w.y, w.z]).collect();
