@@ -128,8 +128,15 @@ impl GpuContext {
         let info = adapter.get_info();
         let limits = adapter.limits();
         check_limits(&info.name, &limits)?;
-        // Full adapter limits and the features cubecl may use, so burn can share this device.
-        let wanted = wgpu::Features::SHADER_F16 | wgpu::Features::SHADER_INT64 | wgpu::Features::SUBGROUP;
+        // Full adapter limits and every feature cubecl-wgpu 0.11 reads off the adapter to pick its kernels
+        // (backend/wgsl.rs `register_wgsl_features`, runtime.rs), so burn can share this device: a kernel
+        // it compiles for a feature the adapter has but the device lacks fails validation (lavapipe has
+        // SHADER_FLOAT32_ATOMIC, and burn's sum reduction uses it).
+        let wanted = wgpu::Features::SHADER_F16
+            | wgpu::Features::SHADER_F64
+            | wgpu::Features::SHADER_INT64
+            | wgpu::Features::SHADER_FLOAT32_ATOMIC
+            | wgpu::Features::SUBGROUP;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("factory-engine"),
             required_features: adapter.features() & wanted,

@@ -82,11 +82,11 @@ pub struct PointMass {
     spec: EnvSpec,
     rng: SplitMix64,
     /// Positions [m], shape [env_count * 2].
-    world_p: Vec<[f32; 2]>,
+    pub(crate) world_p: Vec<[f32; 2]>,
     /// Velocities [m/s], shape [env_count].
-    world_v: Vec<[f32; 2]>,
+    pub(crate) world_v: Vec<[f32; 2]>,
     /// Goals [m], shape [env_count].
-    world_goal: Vec<[f32; 2]>,
+    pub(crate) world_goal: Vec<[f32; 2]>,
     /// Control steps taken in the current episode, shape [env_count].
     world_steps: Vec<u32>,
 }

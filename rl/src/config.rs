@@ -24,9 +24,10 @@ use crate::error::{Result, RlError};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DeviceChoice {
-    /// The best backend this build has (today burn-flex; a hardware GPU once the wgpu backend is built in).
+    /// burn's wgpu backend when the engine runs on a hardware GPU, burn-flex when it runs on a software
+    /// rasteriser (see `train::resolve_device`).
     Auto,
-    /// burn's wgpu backend on the engine's device; refused by this build (see `train::resolve_device`).
+    /// burn's wgpu backend on the engine's own device and queue.
     Wgpu,
     /// burn-flex on the host CPU.
     Cpu,

@@ -120,7 +120,19 @@ impl ActorCritic {
     }
 }
 
-/// A tensor's values on the host.
+thread_local! {
+    static READBACKS: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+}
+
+/// Device-to-host reads made through [`to_vec`] on this thread so far: the learner's one choke point for
+/// readbacks, counted so a test can prove a device rollout reads nothing back per step (per thread, so tests
+/// running beside it do not count).
+pub fn readbacks() -> u64 {
+    READBACKS.with(|c| c.get())
+}
+
+/// A tensor's values on the host (a readback when the tensor lives on a GPU; counted by [`readbacks`]).
 pub fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    READBACKS.with(|c| c.set(c.get() + 1));
     t.into_data().try_into_vec::<f32>().expect("f32 tensor")
 }

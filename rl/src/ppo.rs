@@ -13,7 +13,7 @@ use burn::grad_clipping::GradientClippingConfig;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 use factory_engine::rng::SplitMix64;
-use factory_envs::{Env, StepBuffers};
+use factory_envs::{DeviceEnv, DeviceStep, Env, StepBuffers};
 
 use crate::config::PpoConfig;
 use crate::model::{to_vec, ActorCritic};
@@ -77,6 +77,68 @@ impl EpisodeTracker {
     pub fn take(&mut self) -> Vec<(f32, u32, bool)> {
         std::mem::take(&mut self.finished)
     }
+}
+
+/// Episode tallies of a device rollout, kept on the device and read with the update's summary.
+#[derive(Clone, Debug)]
+pub struct DeviceEpisodes {
+    /// Undiscounted return of each world's running episode, [N].
+    pub running_return: Tensor<1>,
+    /// Steps of each world's running episode, [N].
+    pub running_length: Tensor<1>,
+    /// Since the last [`take`](Self::take): [episodes ended, succeeded, sum of their returns, sum of their
+    /// lengths], [4].
+    pub totals: Tensor<1>,
+}
+
+impl DeviceEpisodes {
+    /// For `env_count` worlds on `device`.
+    pub fn new(env_count: usize, device: &Device) -> Self {
+        Self {
+            running_return: Tensor::zeros([env_count], device),
+            running_length: Tensor::zeros([env_count], device),
+            totals: Tensor::zeros([4], device),
+        }
+    }
+
+    /// Records one step's results (tensor ops only).
+    pub fn record(&mut self, out: &DeviceStep) {
+        let ret = self.running_return.clone() + out.reward.clone();
+        let len = self.running_length.clone().add_scalar(1.0);
+        let done = (out.terminated.clone() + out.truncated.clone()).clamp(0.0, 1.0);
+        let ended = Tensor::cat(
+            vec![
+                done.clone().sum(),
+                (out.success.clone() * done.clone()).sum(),
+                (ret.clone() * done.clone()).sum(),
+                (len.clone() * done.clone()).sum(),
+            ],
+            0,
+        );
+        self.totals = self.totals.clone() + ended;
+        let keep = done.neg().add_scalar(1.0);
+        self.running_return = ret * keep.clone();
+        self.running_length = len * keep;
+    }
+
+    /// The totals since the last call (still on the device), and zeroes them.
+    pub fn take(&mut self) -> Tensor<1> {
+        let device = self.totals.device();
+        std::mem::replace(&mut self.totals, Tensor::zeros([4], &device))
+    }
+}
+
+/// What a rollout accumulates per step before it is stacked.
+#[derive(Default)]
+struct Steps {
+    obs: Vec<Tensor<2>>,
+    raw: Vec<Tensor<2>>,
+    action: Vec<Tensor<2>>,
+    logp: Vec<Tensor<1>>,
+    value: Vec<Tensor<1>>,
+    reward: Vec<Tensor<1>>,
+    terminated: Vec<Tensor<1>>,
+    truncated: Vec<Tensor<1>>,
 }
 
 /// One rollout on the learner's device: `horizon` steps of `env_count` worlds.
@@ -198,51 +260,100 @@ impl Ppo {
     }
 
     /// Steps `env` for `horizon` steps from the observations in `buf` (which it leaves holding the last),
-    /// recording episodes in `episodes`.
+    /// recording episodes in `episodes`. A host env: one upload of the observations and one download of the
+    /// actions per step.
     pub fn collect(&mut self, env: &mut dyn Env, buf: &mut StepBuffers, episodes: &mut EpisodeTracker) -> Rollout {
-        let (n, a_dim, t_len) = (self.env_count, self.action_dim, self.cfg.horizon);
+        let n = self.env_count;
         let policy = self.model.valid();
-        let log_std = policy.log_std.val();
-        let std = log_std.clone().exp().unsqueeze_dim::<2>(0);
-        let logp_const = -log_std.sum().into_scalar::<f32>() - 0.5 * a_dim as f32 * LN_2PI;
-        let (mut obs_s, mut raw_s, mut act_s, mut logp_s, mut val_s, mut rew_s, mut term_s, mut trunc_s) =
-            (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
+        let gaussian = self.gaussian(&policy);
         let flags = |v: &[f32], dev: &Device| Tensor::<1>::from_floats(v, dev);
-        for _ in 0..t_len {
+        let mut steps = Steps::default();
+        for _ in 0..self.cfg.horizon {
             let raw = Tensor::<1>::from_floats(buf.observation.as_slice(), &self.device).reshape([n, self.obs_dim]);
-            let obs = self.normalize_obs(raw.clone());
-            let (mu, v) = policy.forward(obs.clone());
-            let eps = normal_tensor(&mut self.rng, n, a_dim, &self.device);
-            let action = mu + eps.clone() * std.clone();
-            let logp = eps.powi_scalar(2).sum_dim(1).flatten::<1>(0, 1).mul_scalar(-0.5).add_scalar(logp_const);
+            let action = self.act(&policy, &gaussian, raw, &mut steps);
             // The one readback per step on a host env: the actions it must apply.
-            let action_host = to_vec(action.clone());
-            env.step(&action_host, buf);
+            env.step(&to_vec(action), buf);
             episodes.record(buf);
-            obs_s.push(obs);
-            raw_s.push(raw);
-            act_s.push(action);
-            logp_s.push(logp);
-            val_s.push(self.value_to_returns(v));
-            rew_s.push(flags(&buf.reward, &self.device));
-            term_s.push(flags(&buf.terminated, &self.device));
-            trunc_s.push(flags(&buf.truncated, &self.device));
+            steps.reward.push(flags(&buf.reward, &self.device));
+            steps.terminated.push(flags(&buf.terminated, &self.device));
+            steps.truncated.push(flags(&buf.truncated, &self.device));
         }
         let raw_last = Tensor::<1>::from_floats(buf.observation.as_slice(), &self.device).reshape([n, self.obs_dim]);
+        self.finish(&policy, raw_last, steps)
+    }
+
+    /// As [`collect`](Self::collect) for a device env: from the observations `obs` (left holding the last),
+    /// everything stays on the device; episodes are tallied in `episodes` and read with the update's summary.
+    /// The host uploads the exploration noise and reads nothing back.
+    pub fn collect_device(
+        &mut self,
+        env: &mut dyn DeviceEnv,
+        obs: &mut Tensor<2>,
+        episodes: &mut DeviceEpisodes,
+    ) -> Rollout {
+        let policy = self.model.valid();
+        let gaussian = self.gaussian(&policy);
+        let mut steps = Steps::default();
+        for _ in 0..self.cfg.horizon {
+            let action = self.act(&policy, &gaussian, obs.clone(), &mut steps);
+            let out = env.step(action);
+            episodes.record(&out);
+            *obs = out.observation;
+            steps.reward.push(out.reward);
+            steps.terminated.push(out.terminated);
+            steps.truncated.push(out.truncated);
+        }
+        self.finish(&policy, obs.clone(), steps)
+    }
+
+    /// The policy's sigma [1, A] and its log-density constant `-sum(log sigma) - A/2 ln(2 pi)` [1], for a
+    /// rollout (tensors: reading them would be a readback).
+    fn gaussian(&self, policy: &ActorCritic) -> (Tensor<2>, Tensor<1>) {
+        let log_std = policy.log_std.val();
+        let std = log_std.clone().exp().unsqueeze_dim::<2>(0);
+        let logp_const = log_std.sum().neg().sub_scalar(0.5 * self.action_dim as f32 * LN_2PI);
+        (std, logp_const)
+    }
+
+    /// One acting step from raw observations [N, O]: records the normalised observations, the sampled action,
+    /// its log-probability and the value in `steps`, and returns the action (unclipped) [N, A].
+    fn act(
+        &mut self,
+        policy: &ActorCritic,
+        gaussian: &(Tensor<2>, Tensor<1>),
+        raw: Tensor<2>,
+        steps: &mut Steps,
+    ) -> Tensor<2> {
+        let n = self.env_count;
+        let obs = self.normalize_obs(raw.clone());
+        let (mu, v) = policy.forward(obs.clone());
+        let eps = normal_tensor(&mut self.rng, n, self.action_dim, &self.device);
+        let action = mu + eps.clone() * gaussian.0.clone();
+        let logp = eps.powi_scalar(2).sum_dim(1).flatten::<1>(0, 1).mul_scalar(-0.5) + gaussian.1.clone().expand([n]);
+        steps.obs.push(obs);
+        steps.raw.push(raw);
+        steps.action.push(action.clone());
+        steps.logp.push(logp);
+        steps.value.push(self.value_to_returns(v));
+        action
+    }
+
+    /// The rollout from its steps and the observations after the last one.
+    fn finish(&mut self, policy: &ActorCritic, raw_last: Tensor<2>, steps: Steps) -> Rollout {
         let (_, v_last) = policy.forward(self.normalize_obs(raw_last));
         let last_value = self.value_to_returns(v_last);
         if self.cfg.normalize_observation {
             // After the rollout, so the stored observations and log-probabilities stay consistent.
-            self.obs_norm.update(Tensor::cat(raw_s, 0));
+            self.obs_norm.update(Tensor::cat(steps.raw, 0));
         }
         Rollout {
-            obs: Tensor::stack(obs_s, 0),
-            action: Tensor::stack(act_s, 0),
-            logp: Tensor::stack(logp_s, 0),
-            value: Tensor::stack(val_s, 0),
-            reward: Tensor::stack(rew_s, 0),
-            terminated: Tensor::stack(term_s, 0),
-            truncated: Tensor::stack(trunc_s, 0),
+            obs: Tensor::stack(steps.obs, 0),
+            action: Tensor::stack(steps.action, 0),
+            logp: Tensor::stack(steps.logp, 0),
+            value: Tensor::stack(steps.value, 0),
+            reward: Tensor::stack(steps.reward, 0),
+            terminated: Tensor::stack(steps.terminated, 0),
+            truncated: Tensor::stack(steps.truncated, 0),
             last_value,
         }
     }
@@ -272,6 +383,12 @@ impl Ppo {
 
     /// One PPO update on `rollout`: `epochs` passes of shuffled minibatches.
     pub fn update(&mut self, rollout: Rollout) -> UpdateStats {
+        self.update_with(rollout, None).0
+    }
+
+    /// As [`update`](Self::update), reading `extra` (a device rollout's episode tallies) back in the same
+    /// transfer as the summary; returns its values too.
+    pub fn update_with(&mut self, rollout: Rollout, extra: Option<Tensor<1>>) -> (UpdateStats, Vec<f32>) {
         let [t_len, n] = rollout.reward.dims();
         let batch = t_len * n;
         let adv = self.gae(&rollout).reshape([batch]);
@@ -349,17 +466,17 @@ impl Ppo {
         }
         // The logging summary: the one readback of the update.
         let sigma = self.model.log_std.val().without_autodiff().exp().mean();
-        let summary = to_vec(Tensor::cat(
-            vec![Tensor::stack::<2>(sums, 0).mean_dim(0).flatten::<1>(0, 1), mean_reward, sigma],
-            0,
-        ));
-        UpdateStats {
+        let mut parts = vec![Tensor::stack::<2>(sums, 0).mean_dim(0).flatten::<1>(0, 1), mean_reward, sigma];
+        parts.extend(extra);
+        let summary = to_vec(Tensor::cat(parts, 0));
+        let stats = UpdateStats {
             actor_loss: summary[0],
             critic_loss: summary[1],
             bounds_loss: summary[2],
             mean_reward: summary[3],
             sigma: summary[4],
-        }
+        };
+        (stats, summary[5..].to_vec())
     }
 
     /// A Fisher-Yates permutation of 0..n from the learner's generator.

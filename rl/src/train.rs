@@ -15,19 +15,51 @@ use crate::ppo::{EpisodeTracker, Ppo, UpdateStats};
 
 /// The learner's device for a config choice, and a name for logs.
 ///
-/// `cpu` and `auto` are burn-flex on the host: on this project's 2-core machines flex trains the Table IX MLP
-/// about 3x faster than burn-wgpu over lavapipe (DESIGN.md). `wgpu` (burn's wgpu backend sharing the
-/// engine's device) is not in this build yet: burn's wgpu backend roughly doubles a clean build, and it
-/// comes with the device-resident rollout; asking for it is refused by name.
-pub fn resolve_device(choice: DeviceChoice) -> Result<(Device, &'static str)> {
+/// `wgpu` is burn's wgpu backend on the engine's own device (one `wgpu::Device` and queue serve the simulator
+/// and the learner, DESIGN.md section 1); it needs factory-rl's `wgpu` cargo feature. `cpu` is burn-flex on
+/// the host. `auto` takes wgpu when the engine's adapter is a hardware GPU and the feature is built, else
+/// flex: over a software rasteriser (lavapipe) flex trains the Table IX MLP several times faster
+/// (docs/BENCHMARKS.md).
+pub fn resolve_device(choice: DeviceChoice) -> Result<(Device, String)> {
+    let flex = |why: &str| (Device::flex(), format!("cpu (burn-flex{why})"));
     match choice {
-        DeviceChoice::Cpu => Ok((Device::flex(), "cpu (burn-flex)")),
-        DeviceChoice::Auto => Ok((Device::flex(), "cpu (burn-flex; auto)")),
-        DeviceChoice::Wgpu => Err(RlError::InvalidValue {
-            field: "ppo.device".into(),
-            reason: "\"wgpu\" is not built in this version of factory-rl; valid: \"auto\", \"cpu\"".into(),
-        }),
+        DeviceChoice::Cpu => Ok(flex("")),
+        DeviceChoice::Wgpu => engine_wgpu_device(),
+        DeviceChoice::Auto => match factory_engine::gpu::GpuContext::global() {
+            Ok(gpu) if !gpu.is_software() && cfg!(feature = "wgpu") => engine_wgpu_device(),
+            Ok(gpu) if !gpu.is_software() => Ok(flex("; auto: built without the wgpu feature")),
+            _ => Ok(flex("; auto: no hardware GPU")),
+        },
     }
+}
+
+/// burn's wgpu runtime registered on the engine's device and queue, once per process (cubecl asks that a
+/// setup be registered once; the device is cloned after that).
+#[cfg(feature = "wgpu")]
+pub fn engine_wgpu_device() -> Result<(Device, String)> {
+    static DEVICE: std::sync::OnceLock<std::result::Result<(Device, String), String>> = std::sync::OnceLock::new();
+    let made = DEVICE.get_or_init(|| {
+        let gpu = factory_engine::gpu::GpuContext::global().map_err(|e| e.to_string())?;
+        let setup = burn::tensor::wgpu::WgpuSetup {
+            instance: gpu.instance.clone(),
+            adapter: gpu.adapter.clone(),
+            device: gpu.device.clone(),
+            queue: gpu.queue.clone(),
+            backend: gpu.info.backend,
+        };
+        let device = Device::wgpu_options().setup(setup).init().map_err(|e| e.to_string())?;
+        Ok((device, format!("wgpu (burn on the engine's device: {}, {:?})", gpu.info.name, gpu.info.backend)))
+    });
+    made.clone().map_err(|reason| RlError::InvalidValue { field: "ppo.device".into(), reason })
+}
+
+/// Without the `wgpu` feature: refused by name.
+#[cfg(not(feature = "wgpu"))]
+pub fn engine_wgpu_device() -> Result<(Device, String)> {
+    Err(RlError::InvalidValue {
+        field: "ppo.device".into(),
+        reason: "\"wgpu\" needs factory-rl built with `--features wgpu`; valid in this build: \"auto\", \"cpu\"".into(),
+    })
 }
 
 /// Sets each world's episode step count so its first episode is truncated after a uniform random
@@ -193,5 +225,31 @@ impl Trainer {
     pub fn export_policy(&self, path: &Path) -> Result<()> {
         PolicyFile::from_learner(&self.ppo, self.env.spec(), &self.cfg.env, self.updates_done, self.env_steps)
             .save(path)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `cpu` is flex; `wgpu` is the engine's device with the feature and refused by name without it; `auto`
+    /// never picks wgpu over a software rasteriser.
+    #[test]
+    fn device_choices_resolve_or_are_refused_by_name() {
+        let (_, name) = resolve_device(DeviceChoice::Cpu).unwrap();
+        assert!(name.contains("flex"), "{name}");
+        match resolve_device(DeviceChoice::Wgpu) {
+            Ok((_, name)) => assert!(cfg!(feature = "wgpu") && name.contains("engine's device"), "{name}"),
+            Err(e) => {
+                let e = e.to_string();
+                assert!(!cfg!(feature = "wgpu") || factory_engine::gpu::GpuContext::global().is_err(), "{e}");
+                assert!(e.contains("ppo.device"), "{e}");
+            }
+        }
+        let software = factory_engine::gpu::GpuContext::global().map(|g| g.is_software()).unwrap_or(true);
+        let (_, name) = resolve_device(DeviceChoice::Auto).unwrap();
+        if software {
+            assert!(name.contains("flex"), "auto over a software adapter: {name}");
+        }
     }
 }

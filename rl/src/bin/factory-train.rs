@@ -52,7 +52,7 @@ fn main() -> Result<()> {
                 bail!("--resume continues the run with its saved config; only --updates may change");
             }
             let ck = checkpoint_path(run);
-            let mut name = "";
+            let mut name = String::new();
             let mut t = Trainer::resume_on(&ck, |cfg| {
                 let (device, n) = resolve_device(cfg.ppo.device)?;
                 name = n;

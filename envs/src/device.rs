@@ -1,0 +1,48 @@
+//! Device-resident envs: the [`DeviceEnv`] plugin trait, whose observations, rewards and done flags are burn
+//! tensors on the learner's device and whose actions are read there, so a rollout needs no per-step transfer
+//! between host and device (the "observations and actions never leave the device").
+//!
+//! Semantics are [`Env`](crate::Env)'s (Gymnasium vector envs, same-step autoreset): every
+//! [`DeviceEnv::step`] advances all worlds, reports terminated / truncated / success per world, and resets the
+//! worlds whose episode ended, returning the first observation of their next episode. Flags are 0.0 / 1.0 in
+//! f32 tensors so the learner masks with products, as it does with the host env's buffers.
+//!
+//! A host [`Env`](crate::Env) costs one upload of the observations and one download of the actions per step;
+//! on a machine with a GPU that round trip, not the arithmetic, bounds a small env. A `DeviceEnv` computes
+//! the step with tensor ops (or kernels writing into the tensors' buffers) on the same device as the policy.
+
+use burn::prelude::*;
+
+use crate::env::EnvSpec;
+
+/// What one [`DeviceEnv::step`] (or reset) returns, all on the env's device.
+#[derive(Clone, Debug)]
+pub struct DeviceStep {
+    /// Observations [units per `EnvSpec::observation_names`], shape [env_count, observation_dim]; for a world
+    /// whose episode ended this step, the first observation of its next episode.
+    pub observation: Tensor<2>,
+    /// Rewards of this step, shape [env_count].
+    pub reward: Tensor<1>,
+    /// 1.0 where the episode reached a terminal state this step, else 0.0; [env_count].
+    pub terminated: Tensor<1>,
+    /// 1.0 where the episode hit `max_episode_steps` without terminating, else 0.0; [env_count].
+    pub truncated: Tensor<1>,
+    /// 1.0 where the episode ended in success this step, else 0.0; [env_count].
+    pub success: Tensor<1>,
+}
+
+/// A batch of `env_count` worlds stepped together on a burn device.
+pub trait DeviceEnv: Send {
+    /// The env's spec.
+    fn spec(&self) -> &EnvSpec;
+
+    /// The device its tensors live on.
+    fn device(&self) -> &Device;
+
+    /// Starts a new episode in every world (rewards and flags zero).
+    fn reset(&mut self) -> DeviceStep;
+
+    /// Applies `action` (shape [env_count, action_dim], clipped to [-1, 1]) for one control step, resets the
+    /// worlds whose episode ended and returns the step's results (see the module docs).
+    fn step(&mut self, action: Tensor<2>) -> DeviceStep;
+}
