@@ -24,15 +24,29 @@ fn point_mass_config(cfg: &TrainConfig) -> PointMassConfig {
     }
 }
 
+/// The point mass on `device` with a fresh learner, reset.
+struct Run {
+    env: PointMassDevice,
+    ppo: Ppo,
+    obs: burn::tensor::Tensor<2>,
+    episodes: DeviceEpisodes,
+}
+
+impl Run {
+    fn new(cfg: &TrainConfig, device: &Device) -> Self {
+        let n = cfg.train.env_count;
+        let mut env = PointMassDevice::new(&point_mass_config(cfg), n, 1, device).unwrap();
+        let spec = env.spec().clone();
+        let ppo = Ppo::new(&cfg.ppo, n, spec.observation_dim(), spec.action_dim(), 1, device.clone());
+        let obs = env.reset().observation;
+        Self { env, ppo, obs, episodes: DeviceEpisodes::new(n, device) }
+    }
+}
+
 /// K rollout steps read nothing back; the update reads back once (its summary with the episode tallies).
 fn rollouts_read_back_only_the_summary(device: Device) {
     let cfg = config();
-    let n = cfg.train.env_count;
-    let mut env = PointMassDevice::new(&point_mass_config(&cfg), n, 1, &device).unwrap();
-    let spec = env.spec().clone();
-    let mut ppo = Ppo::new(&cfg.ppo, n, spec.observation_dim(), spec.action_dim(), 1, device.clone());
-    let mut obs = env.reset().observation;
-    let mut episodes = DeviceEpisodes::new(n, &device);
+    let Run { mut env, mut ppo, mut obs, mut episodes } = Run::new(&cfg, &device);
     for _ in 0..2 {
         let before = readbacks();
         let rollout = ppo.collect_device(&mut env, &mut obs, &mut episodes);
@@ -69,12 +83,7 @@ fn a_device_rollout_on_the_engines_wgpu_device_reads_nothing_back_per_step() {
 fn the_device_path_learns_the_point_mass() {
     let cfg = config();
     let device = Device::flex();
-    let n = cfg.train.env_count;
-    let mut env = PointMassDevice::new(&point_mass_config(&cfg), n, 1, &device).unwrap();
-    let spec = env.spec().clone();
-    let mut ppo = Ppo::new(&cfg.ppo, n, spec.observation_dim(), spec.action_dim(), 1, device.clone());
-    let mut obs = env.reset().observation;
-    let mut episodes = DeviceEpisodes::new(n, &device);
+    let Run { mut env, mut ppo, mut obs, mut episodes } = Run::new(&cfg, &device);
     let mut ended = (0.0, 0.0);
     for _ in 0..cfg.train.updates {
         let rollout = ppo.collect_device(&mut env, &mut obs, &mut episodes);
