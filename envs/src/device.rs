@@ -36,9 +36,6 @@ pub trait DeviceEnv: Send {
     /// The env's spec.
     fn spec(&self) -> &EnvSpec;
 
-    /// The device its tensors live on.
-    fn device(&self) -> &Device;
-
     /// Starts a new episode in every world (rewards and flags zero).
     fn reset(&mut self) -> DeviceStep;
 

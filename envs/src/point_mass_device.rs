@@ -71,10 +71,6 @@ impl DeviceEnv for PointMassDevice {
         &self.spec
     }
 
-    fn device(&self) -> &Device {
-        &self.device
-    }
-
     fn reset(&mut self) -> DeviceStep {
         let n = self.spec.env_count;
         self.world_p = self.draw();
