@@ -57,6 +57,10 @@ pub struct StepBuffers {
     pub truncated: Vec<f32>,
     /// 1.0 where the episode ended in success this step, else 0.0; [env_count].
     pub success: Vec<f32>,
+    /// Why an episode that terminated without success ended this step (`slipped`, `diverged`, ...), where the
+    /// env tells; None elsewhere (and where it does not); [env_count]. Host-side bookkeeping for logs and
+    /// evaluation: the learner never reads it.
+    pub failure: Vec<Option<&'static str>>,
 }
 
 impl StepBuffers {
@@ -69,12 +73,45 @@ impl StepBuffers {
             terminated: vec![0.0; n],
             truncated: vec![0.0; n],
             success: vec![0.0; n],
+            failure: vec![None; n],
         }
     }
 
     /// 1.0 where the episode ended this step for any reason.
     pub fn done(&self, world: usize) -> bool {
         self.terminated[world] != 0.0 || self.truncated[world] != 0.0
+    }
+
+    /// How `world`'s episode ended this step: `success`, `time_limit`, the env's failure cause, or `failure`
+    /// where the env names none; None while it runs.
+    pub fn end_cause(&self, world: usize) -> Option<&'static str> {
+        if self.success[world] != 0.0 {
+            Some("success")
+        } else if self.terminated[world] != 0.0 {
+            Some(self.failure[world].unwrap_or("failure"))
+        } else if self.truncated[world] != 0.0 {
+            Some("time_limit")
+        } else {
+            None
+        }
+    }
+}
+
+/// Episodes counted by how they ended ([`StepBuffers::end_cause`]), in name order.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct EndCauses(pub std::collections::BTreeMap<String, usize>);
+
+impl EndCauses {
+    /// Counts `world`'s episode if it ended this step.
+    pub fn record(&mut self, buf: &StepBuffers, world: usize) {
+        if let Some(c) = buf.end_cause(world) {
+            *self.0.entry(c.to_string()).or_default() += 1;
+        }
+    }
+
+    /// `name=count` pairs separated by spaces (`slipped=2 success=14`); empty when none ended.
+    pub fn summary(&self) -> String {
+        self.0.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(" ")
     }
 }
 

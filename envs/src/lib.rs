@@ -11,7 +11,7 @@ pub mod point_mass_device;
 pub mod registry;
 
 pub use device::{DeviceEnv, DeviceStep};
-pub use env::{Env, EnvSpec, StepBuffers, StepDiagnostics};
+pub use env::{EndCauses, Env, EnvSpec, StepBuffers, StepDiagnostics};
 pub use error::{EnvError, Result};
 pub use franka::nut_bolt::{FrankaNutBolt, FrankaNutBoltConfig};
 pub use point_mass::{PointMass, PointMassConfig};

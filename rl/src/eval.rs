@@ -6,7 +6,7 @@
 //! `episodes` to end.
 
 use burn::prelude::*;
-use factory_envs::{Env, StepBuffers};
+use factory_envs::{EndCauses, Env, StepBuffers};
 
 use crate::model::{to_vec, ActorCritic};
 use crate::normalizer::RunningMeanStd;
@@ -29,6 +29,8 @@ pub struct EvalReport {
     /// Mean norm of the commanded arm joint torques over every step of every world [N m] (NaN when the env
     /// does not measure it).
     pub mean_joint_torque_norm: f64,
+    /// How the episodes ended (`success`, `time_limit`, the env's failure causes).
+    pub ended_by: EndCauses,
 }
 
 /// Named values of world 0 at every evaluation step: its contact-force norms (the data of the paper's Fig.
@@ -92,6 +94,7 @@ pub fn evaluate(
     let mut ended = vec![0usize; n];
     let (mut done, mut succ, mut steps_succ, mut ret_sum) = (0usize, 0usize, 0u64, 0.0f64);
     let (mut torque_sum, mut torque_count) = (0.0f64, 0u64);
+    let mut ended_by = EndCauses::default();
     let mut noise = noise_seed.map(|seed| (SplitMix64(seed), model.log_std.val().exp().unsqueeze_dim::<2>(0)));
     while done < episodes {
         let o = Tensor::<1>::from_floats(buf.observation.as_slice(), device).reshape([n, d]);
@@ -128,6 +131,7 @@ pub fn evaluate(
                 if ended[w] < quota[w] {
                     ended[w] += 1;
                     done += 1;
+                    ended_by.record(&buf, w);
                     ret_sum += ret[w];
                     if buf.success[w] != 0.0 {
                         succ += 1;
@@ -146,5 +150,6 @@ pub fn evaluate(
         mean_steps_to_success: if succ > 0 { steps_succ as f64 / succ as f64 } else { f64::NAN },
         mean_return: ret_sum / done as f64,
         mean_joint_torque_norm: if torque_count > 0 { torque_sum / torque_count as f64 } else { f64::NAN },
+        ended_by,
     }
 }

@@ -13,7 +13,7 @@ use burn::grad_clipping::GradientClippingConfig;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 use factory_engine::rng::SplitMix64;
-use factory_envs::{DeviceEnv, DeviceStep, Env, StepBuffers};
+use factory_envs::{DeviceEnv, DeviceStep, EndCauses, Env, StepBuffers};
 
 use crate::config::PpoConfig;
 use crate::model::{to_vec, ActorCritic};
@@ -52,12 +52,19 @@ pub struct EpisodeTracker {
     pub running_length: Vec<u32>,
     /// Episodes finished since the last [`take`](Self::take): (return, length, success).
     pub finished: Vec<(f32, u32, bool)>,
+    /// How they ended.
+    pub ended_by: EndCauses,
 }
 
 impl EpisodeTracker {
     /// For `env_count` worlds.
     pub fn new(env_count: usize) -> Self {
-        Self { running_return: vec![0.0; env_count], running_length: vec![0; env_count], finished: Vec::new() }
+        Self {
+            running_return: vec![0.0; env_count],
+            running_length: vec![0; env_count],
+            finished: Vec::new(),
+            ended_by: EndCauses::default(),
+        }
     }
 
     /// Records one step's results.
@@ -67,15 +74,16 @@ impl EpisodeTracker {
             self.running_length[w] += 1;
             if buf.done(w) {
                 self.finished.push((self.running_return[w], self.running_length[w], buf.success[w] != 0.0));
+                self.ended_by.record(buf, w);
                 self.running_return[w] = 0.0;
                 self.running_length[w] = 0;
             }
         }
     }
 
-    /// The episodes finished since the last call.
-    pub fn take(&mut self) -> Vec<(f32, u32, bool)> {
-        std::mem::take(&mut self.finished)
+    /// The episodes finished since the last call, and how they ended.
+    pub fn take(&mut self) -> (Vec<(f32, u32, bool)>, EndCauses) {
+        (std::mem::take(&mut self.finished), std::mem::take(&mut self.ended_by))
     }
 }
 

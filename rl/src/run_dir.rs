@@ -34,7 +34,7 @@ pub fn utc_stamp(unix_seconds: u64) -> String {
 }
 
 /// The CSV columns of `metrics.csv`.
-pub const CSV_HEADER: &str = "update,env_steps,wall_seconds,success_rate,mean_return,episodes,actor_loss,critic_loss,bounds_loss,mean_reward,sigma,rollout_seconds,learn_seconds";
+pub const CSV_HEADER: &str = "update,env_steps,wall_seconds,success_rate,mean_return,episodes,actor_loss,critic_loss,bounds_loss,mean_reward,sigma,rollout_seconds,learn_seconds,ended_by";
 
 /// Appends per-update rows to `metrics.csv`.
 pub struct MetricsCsv {
@@ -67,7 +67,7 @@ impl MetricsCsv {
         let s = &r.stats;
         writeln!(
             self.file,
-            "{},{},{:.3},{},{},{},{},{},{},{},{},{:.4},{:.4}",
+            "{},{},{:.3},{},{},{},{},{},{},{},{},{:.4},{:.4},{}",
             r.update,
             r.env_steps,
             wall_seconds,
@@ -80,7 +80,8 @@ impl MetricsCsv {
             s.mean_reward,
             s.sigma,
             r.rollout_seconds,
-            r.learn_seconds
+            r.learn_seconds,
+            r.ended_by.summary()
         )
         .and_then(|_| self.file.flush())
         .map_err(|e| RlError::io(&self.path, e))

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use burn::prelude::*;
 use factory_engine::rng::SplitMix64;
-use factory_envs::{Env, StepBuffers};
+use factory_envs::{EndCauses, Env, StepBuffers};
 
 use crate::checkpoint::{self, PolicyFile};
 use crate::config::{DeviceChoice, TrainConfig};
@@ -98,6 +98,8 @@ pub struct UpdateReport {
     pub success_rate: f32,
     /// Their mean undiscounted return (NaN when none ended).
     pub mean_return: f32,
+    /// How they ended (`success`, `time_limit`, the env's failure causes).
+    pub ended_by: EndCauses,
     /// Wall time of the rollout (simulation and acting) [s].
     pub rollout_seconds: f64,
     /// Wall time of the PPO update [s].
@@ -191,7 +193,7 @@ impl Trainer {
         self.updates_done += 1;
         self.env_steps += (self.cfg.ppo.horizon * self.cfg.train.env_count) as u64;
         self.wall_seconds += (t2 - t0).as_secs_f64();
-        let finished = self.episodes.take();
+        let (finished, ended_by) = self.episodes.take();
         let k = finished.len();
         let (ret, succ) = finished.iter().fold((0.0f64, 0usize), |(r, s), e| (r + e.0 as f64, s + e.2 as usize));
         UpdateReport {
@@ -201,6 +203,7 @@ impl Trainer {
             episodes: k,
             success_rate: if k > 0 { succ as f32 / k as f32 } else { f32::NAN },
             mean_return: if k > 0 { (ret / k as f64) as f32 } else { f32::NAN },
+            ended_by,
             rollout_seconds: (t1 - t0).as_secs_f64(),
             learn_seconds: (t2 - t1).as_secs_f64(),
         }

@@ -38,6 +38,14 @@ fn ppo_learns_point_mass_reaching() {
     for _ in 0..updates {
         let r = t.update();
         assert!(r.stats.actor_loss.is_finite() && r.stats.critic_loss.is_finite(), "update {}: {r:?}", r.update);
+        // Every episode is counted once by how it ended: success, or the time limit (the point mass has no
+        // failure).
+        let ends = &r.ended_by.0;
+        assert_eq!(ends.values().sum::<usize>(), r.episodes, "update {}: {ends:?}", r.update);
+        assert!(ends.keys().all(|k| k == "success" || k == "time_limit"), "update {}: {ends:?}", r.update);
+        if r.episodes > 0 {
+            assert_eq!(ends.get("success").copied().unwrap_or(0) as f32 / r.episodes as f32, r.success_rate);
+        }
         last = Some(r);
     }
     let last = last.unwrap();
@@ -57,6 +65,8 @@ fn ppo_learns_point_mass_reaching() {
         t.env_steps, last.success_rate
     );
     assert_eq!(report.episodes, 1024);
+    assert_eq!(report.ended_by.0.values().sum::<usize>(), 1024, "{:?}", report.ended_by);
+    assert_eq!(report.ended_by.0.get("success").copied().unwrap_or(0) as f64 / 1024.0, report.success_rate);
     assert!(report.success_rate > 0.95, "evaluation success {:.3} <= 0.95", report.success_rate);
     // Sampled actions (`factory-eval --stochastic`): the noise acts, and the same seed repeats the run.
     let sampled = |seed| {

@@ -260,8 +260,8 @@ pub enum Outcome {
     Running,
     /// Terminated in success.
     Success,
-    /// Terminated in failure.
-    Failure,
+    /// Terminated in failure, and why (`far`, `slipped`, `fallen`, `diverged`).
+    Failure(&'static str),
 }
 
 /// The midpoint between the finger pads' centres [m]: half a pad length up the fingers from the fingertip
@@ -334,13 +334,15 @@ impl NutBoltTask for Screw {
         if to_target < self.pitch {
             return Outcome::Success;
         }
-        let far = to_target > self.far_error;
         let pads = pad_midpoint(v.tip_pos, v.tip_quat);
-        let slipped = v.nut_com.distance(pads) > 0.5 * FINGERPAD_LENGTH + 0.5 * self.nut_height;
         let off_axis = Vec3::new(v.nut_com.x, v.nut_com.y, 0.0).length() > 0.5 * self.bolt_diameter;
-        let fallen = off_axis && v.nut_com.z < self.bolt_top + 0.5 * self.nut_height;
-        if far || slipped || fallen {
-            Outcome::Failure
+        // Several can hold at once (a fallen nut has usually slipped too); the first named is reported.
+        if off_axis && v.nut_com.z < self.bolt_top + 0.5 * self.nut_height {
+            Outcome::Failure("fallen")
+        } else if v.nut_com.distance(pads) > 0.5 * FINGERPAD_LENGTH + 0.5 * self.nut_height {
+            Outcome::Failure("slipped")
+        } else if to_target > self.far_error {
+            Outcome::Failure("far")
         } else {
             Outcome::Running
         }
@@ -807,11 +809,11 @@ impl Env for FrankaNutBolt {
         let mut any_reset = false;
         for (w, v) in views.iter().enumerate() {
             self.world_steps[w] += 1;
-            let outcome = if diverged[w] { Outcome::Failure } else { self.task.outcome(v) };
+            let outcome = if diverged[w] { Outcome::Failure("diverged") } else { self.task.outcome(v) };
             let reward = if diverged[w] { 0.0 } else { self.task.reward(v) }
                 + match outcome {
                     Outcome::Success => self.cfg.success_bonus,
-                    Outcome::Failure => -self.cfg.failure_penalty,
+                    Outcome::Failure(_) => -self.cfg.failure_penalty,
                     Outcome::Running => 0.0,
                 };
             let timed_out = outcome == Outcome::Running && self.world_steps[w] >= self.cfg.max_episode_steps;
@@ -819,6 +821,10 @@ impl Env for FrankaNutBolt {
             out.terminated[w] = (outcome != Outcome::Running) as u8 as f32;
             out.truncated[w] = timed_out as u8 as f32;
             out.success[w] = (outcome == Outcome::Success) as u8 as f32;
+            out.failure[w] = match outcome {
+                Outcome::Failure(cause) => Some(cause),
+                _ => None,
+            };
             if outcome != Outcome::Running || timed_out {
                 self.reset_world(w);
                 self.world_steps[w] = 0;
@@ -880,7 +886,38 @@ mod tests {
         let above = Screw { target: task.target - Vec3::Z * 0.05, ..task.clone() };
         let at = |d: f32| above.outcome(&view(level + Vec3::Z * d));
         assert_eq!(at(limit - 1e-4), Outcome::Running);
-        assert_eq!(at(limit + 1e-4), Outcome::Failure);
+        assert_eq!(at(limit + 1e-4), Outcome::Failure("slipped"));
         assert_eq!(at(-(limit - 1e-4)), Outcome::Running);
+    }
+
+    /// Each failure is reported by its cause: off the axis below the bolt's top is `fallen` (whether or not the
+    /// pads still hold it), more than `far_error` from the target with the pads on the nut is `far`.
+    #[test]
+    fn screw_failures_name_their_cause() {
+        let task = Screw {
+            target: Vec3::ZERO,
+            pitch: 0.002,
+            nut_height: 0.0148,
+            bolt_diameter: 0.016,
+            bolt_top: 0.05,
+            far_error: 0.1,
+        };
+        let tip_quat = Quat::from_rotation_x(std::f32::consts::PI);
+        let view = |nut: Vec3| WorldView {
+            // The pads' midpoint on the nut's centre of mass.
+            tip_pos: nut - Vec3::Z * (0.5 * FINGERPAD_LENGTH),
+            tip_quat,
+            tip_linvel: Vec3::ZERO,
+            tip_angvel: Vec3::ZERO,
+            nut_com: nut,
+            nut_quat: Quat::IDENTITY,
+            nut_linvel: Vec3::ZERO,
+            nut_angvel: Vec3::ZERO,
+            nut_frame: Vec3::ZERO,
+        };
+        assert_eq!(task.outcome(&view(Vec3::new(0.0, 0.0, 0.03))), Outcome::Running);
+        assert_eq!(task.outcome(&view(Vec3::new(0.0, 0.0, 0.0015))), Outcome::Success);
+        assert_eq!(task.outcome(&view(Vec3::new(0.02, 0.0, 0.03))), Outcome::Failure("fallen"));
+        assert_eq!(task.outcome(&view(Vec3::new(0.0, 0.0, 0.11))), Outcome::Failure("far"));
     }
 }

@@ -81,14 +81,15 @@ fn main() -> Result<()> {
     } else {
         println!(
             "{} ({} actions): {} episodes, success {:.1}%, mean steps to success {:.1}, mean return {:.3}, mean joint torque \
-             norm {:.2} N m",
+             norm {:.2} N m; ended: {}",
             policy.env,
             if report.stochastic { "sampled" } else { "mean" },
             report.episodes,
             100.0 * report.success_rate,
             report.mean_steps_to_success,
             report.mean_return,
-            report.mean_joint_torque_norm
+            report.mean_joint_torque_norm,
+            report.ended_by.summary()
         );
     }
     Ok(())

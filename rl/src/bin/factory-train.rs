@@ -148,6 +148,9 @@ fn main() -> Result<()> {
                 tb.add_scalar(tag, v, step);
             }
         }
+        for (cause, count) in &r.ended_by.0 {
+            tb.add_scalar(&format!("episode/ended_{cause}"), *count as f32, step);
+        }
         if args.json {
             println!("{}", serde_json::json!({"report": r, "env_steps_per_second": sps}));
         } else {
