@@ -14,6 +14,7 @@
 use burn::prelude::*;
 
 use crate::env::EnvSpec;
+use crate::error::{EnvError, Result};
 
 /// What one [`DeviceEnv::step`] (or reset) returns, all on the env's device.
 #[derive(Clone, Debug)]
@@ -42,4 +43,27 @@ pub trait DeviceEnv: Send {
     /// Applies `action` (shape [env_count, action_dim], clipped to [-1, 1]) for one control step, resets the
     /// worlds whose episode ended and returns the step's results (see the module docs).
     fn step(&mut self, action: Tensor<2>) -> DeviceStep;
+
+    /// Hook: the env's whole state as bytes (read back from the device: for checkpoints, not per step), so a
+    /// resumed run continues exactly; `None` (the default) when the env cannot.
+    fn save_state(&self) -> Option<Vec<u8>> {
+        None
+    }
+
+    /// Hook: restores what [`save_state`](Self::save_state) wrote for an env of the same spec.
+    fn load_state(&mut self, _bytes: &[u8]) -> Result<()> {
+        Err(EnvError::InvalidValue {
+            field: "state",
+            reason: format!("device env `{}` cannot restore a state", self.spec().name),
+        })
+    }
+
+    /// Hook: as [`Env::set_episode_steps`](crate::Env::set_episode_steps) (each world's step count within its
+    /// running episode); the default refuses.
+    fn set_episode_steps(&mut self, _steps: &[u32]) -> Result<()> {
+        Err(EnvError::InvalidValue {
+            field: "episode_steps",
+            reason: format!("device env `{}` cannot set its episodes' step counts", self.spec().name),
+        })
+    }
 }

@@ -16,4 +16,4 @@ pub use error::{EnvError, Result};
 pub use franka::nut_bolt::{FrankaNutBolt, FrankaNutBoltConfig};
 pub use point_mass::{PointMass, PointMassConfig};
 pub use point_mass_device::PointMassDevice;
-pub use registry::{build, EnvConfig, NAMES};
+pub use registry::{build, build_device, EnvConfig, NAMES};

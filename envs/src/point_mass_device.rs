@@ -11,7 +11,7 @@ use burn::prelude::*;
 
 use crate::device::{DeviceEnv, DeviceStep};
 use crate::env::EnvSpec;
-use crate::error::Result;
+use crate::error::{EnvError, Result};
 use crate::point_mass::{PointMass, PointMassConfig};
 
 /// The device-resident point mass.
@@ -59,6 +59,10 @@ impl PointMassDevice {
         let n = self.spec.env_count;
         let v: Vec<f32> = (0..2 * n).map(|_| (2.0 * self.rng.unit() - 1.0) * a).collect();
         Tensor::<1>::from_floats(v.as_slice(), &self.device).reshape([n, 2])
+    }
+
+    fn upload(&self, v: &[f32], cols: usize) -> Tensor<2> {
+        Tensor::<1>::from_floats(v, &self.device).reshape([self.spec.env_count, cols])
     }
 
     fn observe(&self) -> Tensor<2> {
@@ -114,6 +118,47 @@ impl DeviceEnv for PointMassDevice {
             truncated: timed_out,
             success: reached,
         }
+    }
+
+    /// Positions, velocities, goals and step counts as little-endian f32, then the generator's state.
+    fn save_state(&self) -> Option<Vec<u8>> {
+        let mut b = Vec::new();
+        for t in [&self.world_p, &self.world_v, &self.world_goal] {
+            let v = t.clone().into_data().try_into_vec::<f32>().ok()?;
+            b.extend(v.iter().flat_map(|x| x.to_le_bytes()));
+        }
+        let steps = self.world_steps.clone().into_data().try_into_vec::<f32>().ok()?;
+        b.extend(steps.iter().flat_map(|x| x.to_le_bytes()));
+        b.extend(self.rng.0.to_le_bytes());
+        Some(b)
+    }
+
+    fn load_state(&mut self, bytes: &[u8]) -> Result<()> {
+        let n = self.spec.env_count;
+        if bytes.len() != 4 * 7 * n + 8 {
+            return Err(EnvError::InvalidValue {
+                field: "state",
+                reason: format!(
+                    "point_mass (device): {} bytes, expected {} for {n} worlds",
+                    bytes.len(),
+                    4 * 7 * n + 8
+                ),
+            });
+        }
+        let f: Vec<f32> = bytes[..28 * n].chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect();
+        self.world_p = self.upload(&f[..2 * n], 2);
+        self.world_v = self.upload(&f[2 * n..4 * n], 2);
+        self.world_goal = self.upload(&f[4 * n..6 * n], 2);
+        self.world_steps = Tensor::<1>::from_floats(&f[6 * n..], &self.device);
+        self.rng.0 = u64::from_le_bytes(bytes[28 * n..].try_into().unwrap());
+        Ok(())
+    }
+
+    fn set_episode_steps(&mut self, steps: &[u32]) -> Result<()> {
+        crate::env::check_episode_steps(&self.spec, steps)?;
+        let v: Vec<f32> = steps.iter().map(|&s| s as f32).collect();
+        self.world_steps = Tensor::<1>::from_floats(v.as_slice(), &self.device);
+        Ok(())
     }
 }
 
@@ -184,5 +229,43 @@ mod tests {
             .iter()
             .chain(&host_values(dev.world_steps.clone()))
             .all(|x| *x == 0.0));
+    }
+
+    /// A saved state restored into a fresh env continues the same episodes step for step; set episode steps
+    /// truncate where they say.
+    #[test]
+    fn saved_state_continues_and_episode_steps_truncate() {
+        let device = Device::flex();
+        let cfg = PointMassConfig { max_episode_steps: 30, ..Default::default() };
+        let n = 8;
+        let mut a = PointMassDevice::new(&cfg, n, 3, &device).unwrap();
+        a.reset();
+        let act = |k: usize| {
+            let v: Vec<f32> = (0..2 * n).map(|i| ((i + k) % 5) as f32 * 0.4 - 0.8).collect();
+            Tensor::<1>::from_floats(v.as_slice(), &device).reshape([n, 2])
+        };
+        for k in 0..7 {
+            a.step(act(k));
+        }
+        let mut b = PointMassDevice::new(&cfg, n, 99, &device).unwrap();
+        b.reset();
+        b.load_state(&a.save_state().unwrap()).unwrap();
+        for k in 7..50 {
+            let (x, y) = (a.step(act(k)), b.step(act(k)));
+            assert_eq!(host_values(x.observation), host_values(y.observation), "step {k}");
+            assert_eq!(host_values(x.truncated), host_values(y.truncated), "step {k}");
+        }
+        assert!(b.load_state(&[0u8; 5]).unwrap_err().to_string().contains("expected"));
+
+        let mut c = PointMassDevice::new(&PointMassConfig { goal_radius: 1e-6, ..cfg.clone() }, n, 3, &device).unwrap();
+        c.reset();
+        let steps: Vec<u32> = (0..n as u32).map(|w| 29 - w).collect();
+        c.set_episode_steps(&steps).unwrap();
+        for k in 0..n {
+            let trunc = host_values(c.step(act(k)).truncated);
+            assert_eq!(trunc[k], 1.0, "world {k} truncated after {} steps", k + 1);
+            assert_eq!(trunc.iter().sum::<f32>(), 1.0, "step {}", k + 1);
+        }
+        assert!(c.set_episode_steps(&[30; 8]).is_err());
     }
 }

@@ -8,10 +8,12 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::device::DeviceEnv;
 use crate::env::Env;
 use crate::error::{EnvError, Result};
 use crate::franka::nut_bolt::{FrankaNutBolt, FrankaNutBoltConfig};
 use crate::point_mass::{PointMass, PointMassConfig};
+use crate::point_mass_device::PointMassDevice;
 
 /// The registered envs' `type` names.
 pub const NAMES: &[&str] = &["point_mass", "franka_nut_bolt"];
@@ -63,6 +65,20 @@ pub fn build(cfg: &EnvConfig, env_count: usize, seed: u64) -> Result<Box<dyn Env
     Ok(match cfg {
         EnvConfig::PointMass(c) => Box::new(PointMass::new(c, env_count, seed)?),
         EnvConfig::FrankaNutBolt(c) => Box::new(FrankaNutBolt::new(c, env_count, seed)?),
+    })
+}
+
+/// Builds the device-resident implementation of the env a config describes on `device`, where it has one
+/// (`point_mass`); None where it has not (`franka_nut_bolt`: its coupled solve runs on the host).
+pub fn build_device(
+    cfg: &EnvConfig,
+    env_count: usize,
+    seed: u64,
+    device: &burn::prelude::Device,
+) -> Result<Option<Box<dyn DeviceEnv>>> {
+    Ok(match cfg {
+        EnvConfig::PointMass(c) => Some(Box::new(PointMassDevice::new(c, env_count, seed, device)?)),
+        EnvConfig::FrankaNutBolt(_) => None,
     })
 }
 

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Result, RlError};
 use crate::model::{to_vec, ActorCritic};
 use crate::normalizer::RunningMeanStd;
-use crate::ppo::{EpisodeTracker, Ppo};
+use crate::ppo::Ppo;
 
 const MAGIC: &[u8; 8] = b"FRCKPT01";
 /// The `format` string of a policy file.
@@ -105,7 +105,7 @@ pub struct Checkpoint {
     pub optim: Vec<u8>,
 }
 
-/// Writes a checkpoint of `ppo` (and the env state, observation and episodes given) to `path` atomically.
+/// Writes a checkpoint of `ppo` (and the env state, observation and running episodes' returns and lengths given) to `path` atomically.
 #[allow(clippy::too_many_arguments)]
 pub fn save(
     path: &Path,
@@ -115,7 +115,7 @@ pub fn save(
     env_steps: u64,
     wall_seconds: f64,
     observation: &[f32],
-    episodes: &EpisodeTracker,
+    running: &(Vec<f32>, Vec<u32>),
     env_state: Option<Vec<u8>>,
 ) -> Result<()> {
     let meta = CheckpointMeta {
@@ -128,8 +128,8 @@ pub fn save(
         obs_norm: Stats::of(&ppo.obs_norm),
         value_norm: Stats::of(&ppo.value_norm),
         observation: observation.to_vec(),
-        running_return: episodes.running_return.clone(),
-        running_length: episodes.running_length.clone(),
+        running_return: running.0.clone(),
+        running_length: running.1.clone(),
     };
     let json = serde_json::to_vec(&meta).expect("checkpoint metadata serialises");
     let optim = ppo

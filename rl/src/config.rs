@@ -33,6 +33,19 @@ pub enum DeviceChoice {
     Cpu,
 }
 
+/// Where the env of a rollout runs (`[train] rollout`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RolloutChoice {
+    /// The env's device implementation where it has one (`point_mass`), else the host env.
+    Auto,
+    /// The host env: observations uploaded and actions read back every step.
+    Host,
+    /// The env's device implementation on the learner's device: nothing read back per step (refused for an
+    /// env that has none).
+    Device,
+}
+
 /// `[ppo]`: the learner. Defaults are the paper's Table IX (IsaacGymEnvs FactoryTaskNutBoltScrewPPO.yaml).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -124,11 +137,19 @@ pub struct TrainSection {
     /// the learner sees the start of an episode only in a few updates per generation. At most the env's
     /// `max_episode_steps`.
     pub stagger_first_episodes: u32,
+    /// Where the env runs: "auto" (its device implementation where it has one), "host" or "device".
+    pub rollout: RolloutChoice,
 }
 
 impl Default for TrainSection {
     fn default() -> Self {
-        Self { env_count: 128, updates: 1024, checkpoint_every: 50, stagger_first_episodes: 0 }
+        Self {
+            env_count: 128,
+            updates: 1024,
+            checkpoint_every: 50,
+            stagger_first_episodes: 0,
+            rollout: RolloutChoice::Auto,
+        }
     }
 }
 

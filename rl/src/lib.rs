@@ -7,7 +7,7 @@ pub mod model;
 pub mod normalizer;
 pub mod ppo;
 
-pub use config::{DeviceChoice, PpoConfig, TrainConfig};
+pub use config::{DeviceChoice, PpoConfig, RolloutChoice, TrainConfig};
 pub use error::{Result, RlError};
 pub use ppo::{EpisodeTracker, Ppo, UpdateStats};
 pub mod checkpoint;

@@ -95,7 +95,7 @@ pub struct DeviceEpisodes {
     /// Steps of each world's running episode, [N].
     pub running_length: Tensor<1>,
     /// Since the last [`take`](Self::take): [episodes ended, succeeded, sum of their returns, sum of their
-    /// lengths], [4].
+    /// lengths, truncated], [5].
     pub totals: Tensor<1>,
 }
 
@@ -105,7 +105,7 @@ impl DeviceEpisodes {
         Self {
             running_return: Tensor::zeros([env_count], device),
             running_length: Tensor::zeros([env_count], device),
-            totals: Tensor::zeros([4], device),
+            totals: Tensor::zeros([5], device),
         }
     }
 
@@ -120,6 +120,7 @@ impl DeviceEpisodes {
                 (out.success.clone() * done.clone()).sum(),
                 (ret.clone() * done.clone()).sum(),
                 (len.clone() * done.clone()).sum(),
+                out.truncated.clone().sum(),
             ],
             0,
         );
@@ -132,7 +133,7 @@ impl DeviceEpisodes {
     /// The totals since the last call (still on the device), and zeroes them.
     pub fn take(&mut self) -> Tensor<1> {
         let device = self.totals.device();
-        std::mem::replace(&mut self.totals, Tensor::zeros([4], &device))
+        std::mem::replace(&mut self.totals, Tensor::zeros([5], &device))
     }
 }
 

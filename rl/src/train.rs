@@ -6,12 +6,13 @@ use std::time::Instant;
 
 use burn::prelude::*;
 use factory_engine::rng::SplitMix64;
-use factory_envs::{EndCauses, Env, StepBuffers};
+use factory_envs::{DeviceEnv, EndCauses, Env, EnvSpec, StepBuffers};
 
 use crate::checkpoint::{self, PolicyFile};
-use crate::config::{DeviceChoice, TrainConfig};
+use crate::config::{DeviceChoice, RolloutChoice, TrainConfig};
 use crate::error::{Result, RlError};
-use crate::ppo::{EpisodeTracker, Ppo, UpdateStats};
+use crate::model::to_vec;
+use crate::ppo::{DeviceEpisodes, EpisodeTracker, Ppo, UpdateStats};
 
 /// The learner's device for a config choice, and a name for logs.
 ///
@@ -62,13 +63,12 @@ pub fn engine_wgpu_device() -> Result<(Device, String)> {
     })
 }
 
-/// Sets each world's episode step count so its first episode is truncated after a uniform random
-/// 1..=`stagger` steps (see `TrainSection::stagger_first_episodes`); 0 leaves the env as it is.
-fn stagger_first_episodes(env: &mut dyn Env, stagger: u32, seed: u64) -> Result<()> {
+/// Each world's episode step count so that its first episode is truncated after a uniform random
+/// 1..=`stagger` steps (see `TrainSection::stagger_first_episodes`); None for 0 (the env is left as it is).
+fn staggered_steps(spec: &EnvSpec, stagger: u32, seed: u64) -> Result<Option<Vec<u32>>> {
     if stagger == 0 {
-        return Ok(());
+        return Ok(None);
     }
-    let spec = env.spec();
     let max = spec.max_episode_steps;
     if stagger > max {
         return Err(RlError::InvalidValue {
@@ -78,9 +78,92 @@ fn stagger_first_episodes(env: &mut dyn Env, stagger: u32, seed: u64) -> Result<
     }
     // A generator of its own, so the learner's noise and the env's draws are the same with or without it.
     let mut rng = SplitMix64(seed ^ 0x57A6_6E12);
-    let steps: Vec<u32> = (0..spec.env_count).map(|_| max - 1 - (rng.next_u64() % stagger as u64) as u32).collect();
-    env.set_episode_steps(&steps)
-        .map_err(|e| RlError::InvalidValue { field: "train.stagger_first_episodes".into(), reason: e.to_string() })
+    Ok(Some((0..spec.env_count).map(|_| max - 1 - (rng.next_u64() % stagger as u64) as u32).collect()))
+}
+
+fn stagger_error(e: factory_envs::EnvError) -> RlError {
+    RlError::InvalidValue { field: "train.stagger_first_episodes".into(), reason: e.to_string() }
+}
+
+/// The env a run steps and its episode bookkeeping: on the host, or on the learner's device.
+pub enum EnvRun {
+    /// A host env: its observations are uploaded and its actions read back every step.
+    Host {
+        env: Box<dyn Env>,
+        /// The env's last outputs (the next rollout starts from its observations).
+        buf: StepBuffers,
+        episodes: EpisodeTracker,
+    },
+    /// A device env on the learner's device: a rollout reads nothing back; the episode tallies come with the
+    /// update's summary.
+    Device {
+        env: Box<dyn DeviceEnv>,
+        /// The observations the next rollout starts from, [env_count, observation_dim].
+        obs: Tensor<2>,
+        episodes: DeviceEpisodes,
+    },
+}
+
+impl EnvRun {
+    /// The env's spec.
+    pub fn spec(&self) -> &EnvSpec {
+        match self {
+            EnvRun::Host { env, .. } => env.spec(),
+            EnvRun::Device { env, .. } => env.spec(),
+        }
+    }
+
+    /// Whether the env runs on the learner's device.
+    pub fn on_device(&self) -> bool {
+        matches!(self, EnvRun::Device { .. })
+    }
+
+    /// The current observations (read back from the device for a device env), shape [env_count * obs_dim].
+    pub fn observation(&self) -> Vec<f32> {
+        match self {
+            EnvRun::Host { buf, .. } => buf.observation.clone(),
+            EnvRun::Device { obs, .. } => to_vec(obs.clone()),
+        }
+    }
+
+    /// Each world's running episode's return and length so far.
+    fn running(&self) -> (Vec<f32>, Vec<u32>) {
+        match self {
+            EnvRun::Host { episodes, .. } => (episodes.running_return.clone(), episodes.running_length.clone()),
+            EnvRun::Device { episodes, .. } => (
+                to_vec(episodes.running_return.clone()),
+                to_vec(episodes.running_length.clone()).iter().map(|&l| l as u32).collect(),
+            ),
+        }
+    }
+
+    /// Restores a checkpoint's env state, observations and running episodes.
+    fn restore(&mut self, state: &[u8], observation: &[f32], ret: &[f32], len: &[u32]) -> Result<()> {
+        match self {
+            EnvRun::Host { env, buf, episodes } => {
+                env.load_state(state)?;
+                buf.observation.copy_from_slice(observation);
+                episodes.running_return = ret.to_vec();
+                episodes.running_length = len.to_vec();
+            }
+            EnvRun::Device { env, obs, episodes } => {
+                env.load_state(state)?;
+                let device = obs.device();
+                *obs = Tensor::<1>::from_floats(observation, &device).reshape(obs.dims());
+                episodes.running_return = Tensor::from_floats(ret, &device);
+                let len: Vec<f32> = len.iter().map(|&l| l as f32).collect();
+                episodes.running_length = Tensor::from_floats(len.as_slice(), &device);
+            }
+        }
+        Ok(())
+    }
+
+    fn save_state(&self) -> Option<Vec<u8>> {
+        match self {
+            EnvRun::Host { env, .. } => env.save_state(),
+            EnvRun::Device { env, .. } => env.save_state(),
+        }
+    }
 }
 
 /// What one update reports.
@@ -110,14 +193,10 @@ pub struct UpdateReport {
 pub struct Trainer {
     /// The resolved config.
     pub cfg: TrainConfig,
-    /// The env.
-    pub env: Box<dyn Env>,
+    /// The env and its episode bookkeeping.
+    pub run: EnvRun,
     /// The learner.
     pub ppo: Ppo,
-    /// The env's last outputs (the next rollout starts from its observations).
-    pub buf: StepBuffers,
-    /// Episode bookkeeping.
-    pub episodes: EpisodeTracker,
     /// Updates completed.
     pub updates_done: usize,
     /// Env steps taken.
@@ -129,22 +208,46 @@ pub struct Trainer {
 impl Trainer {
     /// A fresh run.
     pub fn new(cfg: TrainConfig, device: Device) -> Result<Self> {
-        let mut env = factory_envs::build(&cfg.env, cfg.train.env_count, cfg.seed)?;
-        let spec = env.spec().clone();
-        let mut buf = StepBuffers::new(&spec);
-        env.reset(&mut buf);
-        stagger_first_episodes(env.as_mut(), cfg.train.stagger_first_episodes, cfg.seed)?;
-        let ppo = Ppo::new(&cfg.ppo, spec.env_count, spec.observation_dim(), spec.action_dim(), cfg.seed, device);
-        Ok(Self {
-            episodes: EpisodeTracker::new(spec.env_count),
-            cfg,
-            env,
-            ppo,
-            buf,
-            updates_done: 0,
-            env_steps: 0,
-            wall_seconds: 0.0,
-        })
+        let (n, seed) = (cfg.train.env_count, cfg.seed);
+        let device_env = match cfg.train.rollout {
+            RolloutChoice::Host => None,
+            RolloutChoice::Auto | RolloutChoice::Device => factory_envs::build_device(&cfg.env, n, seed, &device)?,
+        };
+        let run = match device_env {
+            Some(mut env) => {
+                let obs = env.reset().observation;
+                if let Some(steps) = staggered_steps(env.spec(), cfg.train.stagger_first_episodes, seed)? {
+                    env.set_episode_steps(&steps).map_err(stagger_error)?;
+                }
+                EnvRun::Device { env, obs, episodes: DeviceEpisodes::new(n, &device) }
+            }
+            None if cfg.train.rollout == RolloutChoice::Device => {
+                return Err(RlError::InvalidValue {
+                    field: "train.rollout".into(),
+                    reason: format!(
+                        "\"device\": env `{}` has no device implementation; valid for it: \"auto\", \"host\"",
+                        cfg.env.name()
+                    ),
+                })
+            }
+            None => {
+                let mut env = factory_envs::build(&cfg.env, n, seed)?;
+                let mut buf = StepBuffers::new(env.spec());
+                env.reset(&mut buf);
+                if let Some(steps) = staggered_steps(env.spec(), cfg.train.stagger_first_episodes, seed)? {
+                    env.set_episode_steps(&steps).map_err(stagger_error)?;
+                }
+                EnvRun::Host { env, buf, episodes: EpisodeTracker::new(n) }
+            }
+        };
+        let spec = run.spec();
+        let ppo = Ppo::new(&cfg.ppo, spec.env_count, spec.observation_dim(), spec.action_dim(), seed, device);
+        Ok(Self { cfg, run, ppo, updates_done: 0, env_steps: 0, wall_seconds: 0.0 })
+    }
+
+    /// The env's spec.
+    pub fn spec(&self) -> &EnvSpec {
+        self.run.spec()
     }
 
     /// Continues the run saved in checkpoint `path` (its own config; `device` may differ).
@@ -160,19 +263,15 @@ impl Trainer {
         let mut t = Self::new(cfg, device)?;
         checkpoint::restore(&mut t.ppo, &ck, path)?;
         let bad = |reason: String| RlError::BadFile { path: path.into(), reason };
-        if ck.meta.observation.len() != t.buf.observation.len() {
-            return Err(bad(format!(
-                "observation of length {}, the env has {}",
-                ck.meta.observation.len(),
-                t.buf.observation.len()
-            )));
+        let spec = t.spec();
+        let expected = spec.env_count * spec.observation_dim();
+        if ck.meta.observation.len() != expected {
+            return Err(bad(format!("observation of length {}, the env has {expected}", ck.meta.observation.len())));
         }
         match &ck.env_state {
             Some(state) => {
-                t.env.load_state(state)?;
-                t.buf.observation.copy_from_slice(&ck.meta.observation);
-                t.episodes.running_return = ck.meta.running_return.clone();
-                t.episodes.running_length = ck.meta.running_length.clone();
+                let m = &ck.meta;
+                t.run.restore(state, &m.observation, &m.running_return, &m.running_length)?;
             }
             // The env cannot restore its worlds: they start fresh episodes (already reset by `new`).
             None => {}
@@ -186,16 +285,37 @@ impl Trainer {
     /// One rollout and one PPO update.
     pub fn update(&mut self) -> UpdateReport {
         let t0 = Instant::now();
-        let rollout = self.ppo.collect(self.env.as_mut(), &mut self.buf, &mut self.episodes);
-        let t1 = Instant::now();
-        let stats = self.ppo.update(rollout);
+        let (t1, stats, k, succ, ret, ended_by) = match &mut self.run {
+            EnvRun::Host { env, buf, episodes } => {
+                let rollout = self.ppo.collect(env.as_mut(), buf, episodes);
+                let t1 = Instant::now();
+                let stats = self.ppo.update(rollout);
+                let (finished, ended_by) = episodes.take();
+                let (ret, succ) =
+                    finished.iter().fold((0.0f64, 0usize), |(r, s), e| (r + e.0 as f64, s + e.2 as usize));
+                (t1, stats, finished.len(), succ, ret, ended_by)
+            }
+            EnvRun::Device { env, obs, episodes } => {
+                let rollout = self.ppo.collect_device(env.as_mut(), obs, episodes);
+                let t1 = Instant::now();
+                // The tallies come back with the update's summary: [ended, succeeded, return sum, length
+                // sum, truncated].
+                let (stats, t) = self.ppo.update_with(rollout, Some(episodes.take()));
+                let (k, succ, truncated) = (t[0].round() as usize, t[1].round() as usize, t[4].round() as usize);
+                let mut ended_by = EndCauses::default();
+                let failed = k.saturating_sub(succ + truncated);
+                for (cause, count) in [("success", succ), ("time_limit", truncated), ("failure", failed)] {
+                    if count > 0 {
+                        ended_by.0.insert(cause.into(), count);
+                    }
+                }
+                (t1, stats, k, succ, t[2] as f64, ended_by)
+            }
+        };
         let t2 = Instant::now();
         self.updates_done += 1;
         self.env_steps += (self.cfg.ppo.horizon * self.cfg.train.env_count) as u64;
         self.wall_seconds += (t2 - t0).as_secs_f64();
-        let (finished, ended_by) = self.episodes.take();
-        let k = finished.len();
-        let (ret, succ) = finished.iter().fold((0.0f64, 0usize), |(r, s), e| (r + e.0 as f64, s + e.2 as usize));
         UpdateReport {
             update: self.updates_done,
             env_steps: self.env_steps,
@@ -218,15 +338,15 @@ impl Trainer {
             self.updates_done,
             self.env_steps,
             self.wall_seconds,
-            &self.buf.observation,
-            &self.episodes,
-            self.env.save_state(),
+            &self.run.observation(),
+            &self.run.running(),
+            self.run.save_state(),
         )
     }
 
     /// Exports the policy.
     pub fn export_policy(&self, path: &Path) -> Result<()> {
-        PolicyFile::from_learner(&self.ppo, self.env.spec(), &self.cfg.env, self.updates_done, self.env_steps)
+        PolicyFile::from_learner(&self.ppo, self.run.spec(), &self.cfg.env, self.updates_done, self.env_steps)
             .save(path)
     }
 }

@@ -3,10 +3,10 @@
 
 use std::path::PathBuf;
 
-use burn::tensor::Device;
+use burn::tensor::{Device, Tensor};
 use factory_rl::checkpoint::PolicyFile;
 use factory_rl::eval::{evaluate, EvalOptions, Trace};
-use factory_rl::train::Trainer;
+use factory_rl::train::{EnvRun, Trainer};
 use factory_rl::TrainConfig;
 
 fn config(sets: &[&str]) -> TrainConfig {
@@ -99,45 +99,50 @@ fn ppo_learns_point_mass_reaching() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// Checkpoint after 3 updates, resume in a new trainer, 3 more: the same losses and parameters as 6 straight.
+/// Checkpoint after 3 updates, resume in a new trainer, 3 more: the same losses and parameters as 6 straight,
+/// with the env on the host and on the learner's device (`train.rollout`).
 #[test]
 fn resumed_run_matches_uninterrupted_run() {
-    let sets = ["train.env_count=16", "ppo.minibatch_size=128", "ppo.epochs=2", "seed=7"];
-    let mut straight = Trainer::new(config(&sets), Device::flex()).unwrap();
-    let mut a = Vec::new();
-    for _ in 0..6 {
-        a.push(straight.update().stats);
-    }
+    for rollout in ["host", "device"] {
+        let r = format!("train.rollout=\"{rollout}\"");
+        let sets = ["train.env_count=16", "ppo.minibatch_size=128", "ppo.epochs=2", "seed=7", &r];
+        let mut straight = Trainer::new(config(&sets), Device::flex()).unwrap();
+        assert_eq!(straight.run.on_device(), rollout == "device");
+        let mut a = Vec::new();
+        for _ in 0..6 {
+            a.push(straight.update().stats);
+        }
 
-    let dir = std::env::temp_dir().join(format!("factory-rl-resume-{}", std::process::id()));
-    let ck = dir.join("checkpoint.bin");
-    let mut first = Trainer::new(config(&sets), Device::flex()).unwrap();
-    let mut b = Vec::new();
-    for _ in 0..3 {
-        b.push(first.update().stats);
+        let dir = std::env::temp_dir().join(format!("factory-rl-resume-{rollout}-{}", std::process::id()));
+        let ck = dir.join("checkpoint.bin");
+        let mut first = Trainer::new(config(&sets), Device::flex()).unwrap();
+        let mut b = Vec::new();
+        for _ in 0..3 {
+            b.push(first.update().stats);
+        }
+        first.save_checkpoint(&ck).unwrap();
+        drop(first);
+        let mut resumed = Trainer::resume(&ck, Device::flex()).unwrap();
+        assert_eq!(resumed.updates_done, 3);
+        for _ in 0..3 {
+            b.push(resumed.update().stats);
+        }
+        for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+            assert_eq!(
+                (x.actor_loss, x.critic_loss, x.mean_reward, x.sigma),
+                (y.actor_loss, y.critic_loss, y.mean_reward, y.sigma),
+                "{rollout}: update {}",
+                i + 1
+            );
+        }
+        let pa = straight.ppo.model.export();
+        let pb = resumed.ppo.model.export();
+        assert_eq!(pa.len(), pb.len());
+        for (x, y) in pa.iter().zip(&pb) {
+            assert_eq!(x.2, y.2, "{rollout}: parameter {} differs after resuming", x.0);
+        }
+        std::fs::remove_dir_all(&dir).ok();
     }
-    first.save_checkpoint(&ck).unwrap();
-    drop(first);
-    let mut resumed = Trainer::resume(&ck, Device::flex()).unwrap();
-    assert_eq!(resumed.updates_done, 3);
-    for _ in 0..3 {
-        b.push(resumed.update().stats);
-    }
-    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
-        assert_eq!(
-            (x.actor_loss, x.critic_loss, x.mean_reward, x.sigma),
-            (y.actor_loss, y.critic_loss, y.mean_reward, y.sigma),
-            "update {}",
-            i + 1
-        );
-    }
-    let pa = straight.ppo.model.export();
-    let pb = resumed.ppo.model.export();
-    assert_eq!(pa.len(), pb.len());
-    for (x, y) in pa.iter().zip(&pb) {
-        assert_eq!(x.2, y.2, "parameter {} differs after resuming", x.0);
-    }
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// A policy exported for one spec is refused by an env of another, showing both.
@@ -185,27 +190,41 @@ fn failed_checkpoint_write_keeps_the_previous_one() {
 #[test]
 fn staggered_first_episodes_end_out_of_phase() {
     let sets = ["train.env_count=64", "ppo.minibatch_size=64", "env.max_episode_steps=100"];
-    let plain = Trainer::new(config(&sets), Device::flex()).unwrap();
-    let mut t =
-        Trainer::new(config(&[&sets[..], &["train.stagger_first_episodes=20"]].concat()), Device::flex()).unwrap();
-    assert_eq!(plain.buf.observation, t.buf.observation);
-    let n = 64;
-    let mut first_end = vec![0u32; n];
-    let action = vec![0.0f32; n * 2];
-    for step in 1..=20u32 {
-        t.env.step(&action, &mut t.buf);
-        for w in 0..n {
-            if first_end[w] == 0 && t.buf.done(w) {
-                first_end[w] = step;
-                assert!(t.buf.truncated[w] == 1.0 || t.buf.success[w] == 1.0, "world {w} ended otherwise");
+    for rollout in ["host", "device"] {
+        let with = |more: &[&str]| config(&[&sets[..], &[&format!("train.rollout=\"{rollout}\"")], more].concat());
+        let plain = Trainer::new(with(&[]), Device::flex()).unwrap();
+        let mut t = Trainer::new(with(&["train.stagger_first_episodes=20"]), Device::flex()).unwrap();
+        assert_eq!(t.run.on_device(), rollout == "device");
+        assert_eq!(plain.run.observation(), t.run.observation());
+        let n = 64;
+        let mut first_end = vec![0u32; n];
+        for step in 1..=20u32 {
+            // Per world: ended this step, and whether by truncation or success.
+            let (ended, ok): (Vec<bool>, Vec<bool>) = match &mut t.run {
+                EnvRun::Host { env, buf, .. } => {
+                    env.step(&vec![0.0f32; n * 2], buf);
+                    (0..n).map(|w| (buf.done(w), buf.truncated[w] == 1.0 || buf.success[w] == 1.0)).unzip()
+                }
+                EnvRun::Device { env, .. } => {
+                    let out = env.step(Tensor::zeros([n, 2], &Device::flex()));
+                    let flags = |x: Tensor<1>| x.into_data().try_into_vec::<f32>().unwrap();
+                    let (term, trunc, succ) = (flags(out.terminated), flags(out.truncated), flags(out.success));
+                    (0..n).map(|w| (term[w] + trunc[w] > 0.0, trunc[w] == 1.0 || succ[w] == 1.0)).unzip()
+                }
+            };
+            for w in 0..n {
+                if first_end[w] == 0 && ended[w] {
+                    first_end[w] = step;
+                    assert!(ok[w], "{rollout}: world {w} ended otherwise");
+                }
             }
         }
+        assert!(first_end.iter().all(|&s| s > 0), "{rollout}: all first episodes end within 20 steps: {first_end:?}");
+        let mut distinct = first_end.clone();
+        distinct.sort_unstable();
+        distinct.dedup();
+        assert!(distinct.len() >= 12, "{rollout}: end steps spread over 1..=20: {first_end:?}");
     }
-    assert!(first_end.iter().all(|&s| s > 0), "all first episodes end within 20 steps: {first_end:?}");
-    let mut distinct = first_end.clone();
-    distinct.sort_unstable();
-    distinct.dedup();
-    assert!(distinct.len() >= 12, "end steps spread over 1..=20: {first_end:?}");
 
     let e = Trainer::new(config(&[&sets[..], &["train.stagger_first_episodes=101"]].concat()), Device::flex())
         .err()

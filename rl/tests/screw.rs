@@ -50,3 +50,13 @@ fn screw_smoke_and_exact_resume() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The Franka env has no device implementation yet (its coupled solve runs on the host): asking for a
+/// device rollout is refused naming the field and the valid choices, before any world is built.
+#[test]
+fn a_device_rollout_of_the_franka_env_is_refused_by_name() {
+    let e = Trainer::new(quick(&["train.rollout=\"device\""]), Device::flex()).err().unwrap().to_string();
+    assert!(e.contains("train.rollout") && e.contains("franka_nut_bolt") && e.contains("\"host\""), "{e}");
+    let t = Trainer::new(quick(&["train.env_count=2", "ppo.minibatch_size=16"]), Device::flex()).unwrap();
+    assert!(!t.run.on_device(), "auto keeps the Franka env on the host");
+}

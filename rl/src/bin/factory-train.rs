@@ -62,7 +62,8 @@ fn main() -> Result<()> {
             if let Some(u) = args.updates {
                 t.cfg.train.updates = u;
             }
-            eprintln!("resuming {} at update {} on {name}", run.display(), t.updates_done);
+            let at = if t.run.on_device() { "the learner's device" } else { "the host" };
+            eprintln!("resuming {} at update {} on {name}; env on {at}", run.display(), t.updates_done);
             (t, run.clone())
         }
         None => {
@@ -91,8 +92,10 @@ fn main() -> Result<()> {
             }
             std::fs::create_dir_all(&run).with_context(|| format!("creating {}", run.display()))?;
             let (device, name) = resolve_device(cfg.ppo.device)?;
-            eprintln!("run {} on {name}", run.display());
-            (Trainer::new(cfg, device)?, run)
+            let t = Trainer::new(cfg, device)?;
+            let at = if t.run.on_device() { "the learner's device" } else { "the host" };
+            eprintln!("run {} on {name}; env on {at}", run.display());
+            (t, run)
         }
     };
     factory_rl::checkpoint::write_atomic(&run.join("config.toml"), trainer.cfg.to_toml().as_bytes())?;
