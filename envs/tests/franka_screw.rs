@@ -251,3 +251,31 @@ fn from_the_tip_the_chamfer_keeps_most_constant_actions_on_the_bolt() {
     eprintln!("ended within 300 steps (step, success): {ended:?}");
     assert!(failed <= 6, "{failed} of {worlds} episodes failed within 300 steps: {ended:?}");
 }
+
+/// Regression: a world's trajectory depended on how many worlds were stepped with it. The contact pipeline
+/// split each pair's query triangles into more jobs the fewer worlds there were (to fill the device), and
+/// the split changes which candidates share a reduction batch, so the patches kept: the same constant
+/// action (yaw -0.8) dropped the nut off the tip at step 706 in batches of 6 and 8 worlds and kept it on
+/// in a batch of 1 (2026-12-05; 1 and 8 worlds differed from the first step, 1 and 3 not at all). The env
+/// now fixes the split (`ContactConfig::chunk_world_count`), so evaluating with any `--envs` replays the
+/// physics the policy was trained on.
+#[test]
+fn a_worlds_trajectory_does_not_depend_on_the_batch_size() {
+    let world0 = |worlds: usize| {
+        let (mut e, mut b) = env(worlds, FrankaNutBoltConfig::default());
+        e.reset(&mut b);
+        let mut act = vec![0.0f32; 12 * worlds];
+        for w in 0..worlds {
+            act[12 * w + 5] = -0.8;
+        }
+        let mut obs = Vec::new();
+        for _ in 0..60 {
+            e.step(&act, &mut b);
+            obs.extend_from_slice(&b.observation[..e.spec().observation_dim()]);
+        }
+        obs
+    };
+    let (a, b) = (world0(1), world0(8));
+    let first = a.iter().zip(&b).position(|(x, y)| x != y);
+    assert!(first.is_none(), "world 0 differs from step {:?}", first.map(|i| i / 26));
+}

@@ -42,6 +42,13 @@ pub struct ContactConfig {
     /// Query triangles per generation workgroup; 0 picks a value from the world count at build time.
     /// At most [`max_chunk_triangles`](Self::max_chunk_triangles).
     pub chunk_triangles: u32,
+    /// With `chunk_triangles = 0`: the world count the automatic split assumes; 0 (the default) takes the
+    /// pipeline's own. The split gives a pair more, shorter jobs the fewer worlds there are (to fill the
+    /// device), and it decides which candidates share a reduction batch, hence which patches are kept: with
+    /// the split left to the world count, a world's contacts (and its trajectory) depend on how many worlds
+    /// are stepped with it. Fixing it (any value of 64 or more gives one job per pair where the loop budget
+    /// allows) makes a world's physics the same in a batch of any size.
+    pub chunk_world_count: u32,
     /// Invocations per workgroup of the generate and merge kernels (32, 64, 128 or 256); a reduction batch
     /// holds [`batch_size`](Self::batch_size) candidates, and the CPU twin cuts its batches to that size.
     /// Default 64: on lavapipe (which runs a workgroup as width/8 coroutines) it is faster (M16 nut-bolt grid SDF: GPU/twin time
@@ -78,6 +85,7 @@ impl Default for ContactConfig {
             normal_cos: 10f32.to_radians().cos(),
             iterations: 12,
             chunk_triangles: 0,
+            chunk_world_count: 0,
             workgroup_size: 64,
             candidates_per_invocation: 1,
             subgroups: true,

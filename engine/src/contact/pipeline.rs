@@ -129,7 +129,8 @@ impl ContactPipeline {
         let chunk = if cfg.chunk_triangles == 0 {
             let longest = model.max_triangles();
             let fewest_jobs = longest.div_ceil(max_jobs).next_multiple_of(256);
-            auto_chunk(longest, world_count).min(cfg.max_chunk_triangles()).max(fewest_jobs)
+            let split_for = if cfg.chunk_world_count > 0 { cfg.chunk_world_count } else { world_count };
+            auto_chunk(longest, split_for).min(cfg.max_chunk_triangles()).max(fewest_jobs)
         } else {
             cfg.chunk_triangles
         };

@@ -422,7 +422,9 @@ impl FrankaNutBolt {
         let scene_cfg = SceneConfig {
             worlds: env_count as u32,
             solver,
-            contact: ContactConfig::default(),
+            // One split of the contact jobs for every batch size, so a world's physics (and an evaluation
+            // with any `--envs`) is that of training at 128 worlds (tests/franka_screw.rs).
+            contact: ContactConfig { chunk_world_count: 128, ..ContactConfig::default() },
             segments_per_turn: cfg.segments_per_turn,
             thread_mu: cfg.thread_mu,
             base: BASE,
