@@ -110,7 +110,12 @@ fn resumed_run_matches_uninterrupted_run() {
         assert_eq!(straight.run.on_device(), rollout == "device");
         let mut a = Vec::new();
         for _ in 0..6 {
+            let before = factory_rl::model::readbacks();
             a.push(straight.update().stats);
+            // A device run reads back once per update (the summary with the episode tallies); a host run
+            // once per step (the actions) and once for the summary.
+            let per_update = if rollout == "device" { 1 } else { straight.cfg.ppo.horizon as u64 + 1 };
+            assert_eq!(factory_rl::model::readbacks() - before, per_update, "{rollout}");
         }
 
         let dir = std::env::temp_dir().join(format!("factory-rl-resume-{rollout}-{}", std::process::id()));
