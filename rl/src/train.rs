@@ -189,6 +189,56 @@ pub struct UpdateReport {
     pub learn_seconds: f64,
 }
 
+/// The episodes that ended over the last `window` updates, for a progress line: with long episodes (Screw:
+/// ~1750 steps, 55 updates of horizon 32) most single updates end none.
+#[derive(Clone, Debug)]
+pub struct RecentEpisodes {
+    window: usize,
+    /// Per update in the window: episodes ended, of them succeeded, and how they ended.
+    updates: std::collections::VecDeque<(usize, usize, EndCauses)>,
+}
+
+impl RecentEpisodes {
+    /// Over the last `window` updates (at least 1).
+    pub fn new(window: usize) -> Self {
+        Self { window: window.max(1), updates: Default::default() }
+    }
+
+    /// Adds an update's episodes, dropping the oldest beyond the window.
+    pub fn push(&mut self, r: &UpdateReport) {
+        let succeeded = r.ended_by.0.get("success").copied().unwrap_or(0);
+        self.updates.push_back((r.episodes, succeeded, r.ended_by.clone()));
+        while self.updates.len() > self.window {
+            self.updates.pop_front();
+        }
+    }
+
+    /// `success 88.3% of 77 episodes in the last 50 updates (fallen 6, slipped 3)`: the failures and time
+    /// limits by cause; `no episode ended in the last N updates` when none did.
+    pub fn summary(&self) -> String {
+        let n = self.updates.len();
+        let episodes: usize = self.updates.iter().map(|u| u.0).sum();
+        if episodes == 0 {
+            return format!("no episode ended in the last {n} updates");
+        }
+        let succeeded: usize = self.updates.iter().map(|u| u.1).sum();
+        let mut causes = EndCauses::default();
+        for (_, _, c) in &self.updates {
+            for (k, v) in &c.0 {
+                if k != "success" {
+                    *causes.0.entry(k.clone()).or_default() += v;
+                }
+            }
+        }
+        let rest = causes.0.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ");
+        format!(
+            "success {:.1}% of {episodes} episodes in the last {n} updates{}",
+            100.0 * succeeded as f64 / episodes as f64,
+            if rest.is_empty() { String::new() } else { format!(" ({rest})") }
+        )
+    }
+}
+
 /// An env and a learner stepping together.
 pub struct Trainer {
     /// The resolved config.
@@ -354,6 +404,29 @@ impl Trainer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn recent_episodes_sum_over_their_window() {
+        let report = |episodes: usize, ends: &[(&str, usize)]| UpdateReport {
+            update: 0,
+            env_steps: 0,
+            stats: UpdateStats::default(),
+            episodes,
+            success_rate: f32::NAN,
+            mean_return: f32::NAN,
+            ended_by: EndCauses(ends.iter().map(|(k, v)| (k.to_string(), *v)).collect()),
+            rollout_seconds: 0.0,
+            learn_seconds: 0.0,
+        };
+        let mut r = RecentEpisodes::new(2);
+        r.push(&report(0, &[]));
+        assert_eq!(r.summary(), "no episode ended in the last 1 updates");
+        r.push(&report(4, &[("success", 3), ("slipped", 1)]));
+        r.push(&report(4, &[("success", 2), ("fallen", 1), ("slipped", 1)]));
+        assert_eq!(r.summary(), "success 62.5% of 8 episodes in the last 2 updates (fallen 1, slipped 2)");
+        r.push(&report(1, &[("success", 1)]));
+        assert_eq!(r.summary(), "success 60.0% of 5 episodes in the last 2 updates (fallen 1, slipped 1)");
+    }
 
     /// `cpu` is flex; `wgpu` is the engine's device with the feature and refused by name without it; `auto`
     /// never picks wgpu over a software rasteriser.

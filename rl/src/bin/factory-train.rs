@@ -11,7 +11,7 @@ use std::time::{Instant, SystemTime, UNIX_EPOCH};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use factory_rl::run_dir::{checkpoint_path, policy_path, utc_stamp, MetricsCsv};
-use factory_rl::train::{resolve_device, Trainer};
+use factory_rl::train::{resolve_device, RecentEpisodes, Trainer};
 use factory_rl::TrainConfig;
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -133,8 +133,10 @@ fn main() -> Result<()> {
     let started = Instant::now();
     let steps_at_start = trainer.env_steps;
     let mut interrupted = false;
+    let mut recent = RecentEpisodes::new(50);
     while trainer.updates_done < total {
         let r = trainer.update();
+        recent.push(&r);
         csv.row(&r, trainer.wall_seconds)?;
         let sps = (trainer.env_steps - steps_at_start) as f64 / started.elapsed().as_secs_f64();
         let step = r.update;
@@ -159,9 +161,9 @@ fn main() -> Result<()> {
         } else {
             bar.set_position(step as u64);
             bar.set_message(format!(
-                "{sps:.0} env-steps/s  return {:.3}  success {:.1}%",
-                r.mean_return,
-                100.0 * r.success_rate
+                "{sps:.0} env-steps/s  reward {:.4}/step  {}",
+                r.stats.mean_reward,
+                recent.summary()
             ));
         }
         if step % every == 0 || step == total {
