@@ -65,6 +65,9 @@ fn main() {
     let t0 = std::time::Instant::now();
     for t in 0..steps {
         let zs_before: Vec<f32> = (0..worlds).map(|w| e.scene().nut_pose(w).0.z).collect();
+        // The fingertip relative to the nut's frame before the step (where a failed world is reset).
+        let arm = e.scene().arm();
+        let tip_rel: Vec<glam::Vec3> = (0..worlds).map(|w| arm.ee_pos[w] - e.scene().nut_pose(w).0).collect();
         if sigma > 0.0 {
             for (a, m) in act.iter_mut().zip(&mean) {
                 // Box-Muller.
@@ -76,6 +79,17 @@ fn main() {
         for w in 0..worlds {
             if ended[w].is_none() && b.done(w) {
                 ended[w] = Some((t + 1, b.end_cause(w).unwrap_or("?"), z0[w] - zs_before[w]));
+                if b.success[w] == 0.0 {
+                    let r = tip_rel[w] * 1e3;
+                    println!(
+                        "world {w} ended {:?} at step {}: fingertip - nut frame {:.1} {:.1} {:.1} mm",
+                        ended[w].unwrap().1,
+                        t + 1,
+                        r.x,
+                        r.y,
+                        r.z
+                    );
+                }
             }
         }
         if (t + 1) % 300 == 0 || ended.iter().all(|x| x.is_some()) {

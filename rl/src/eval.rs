@@ -31,6 +31,10 @@ pub struct EvalReport {
     pub mean_joint_torque_norm: f64,
     /// How the episodes ended (`success`, `time_limit`, the env's failure causes).
     pub ended_by: EndCauses,
+    /// Every world's first observation was the same (an env without reset randomisation). With the mean
+    /// action the physics then plays one episode in every world (a world's physics does not depend on the
+    /// batch), so the success rate can only be 0 or 1 up to the resets' own draws.
+    pub identical_starts: bool,
 }
 
 /// Named values of world 0 at every evaluation step: its contact-force norms (the data of the paper's Fig.
@@ -88,6 +92,7 @@ pub fn evaluate(
     let (n, d, a_dim) = (spec.env_count, spec.observation_dim(), spec.action_dim());
     let mut buf = StepBuffers::new(&spec);
     env.reset(&mut buf);
+    let identical_starts = buf.observation.chunks(d).all(|o| o == &buf.observation[..d]);
     let mut ret = vec![0.0f64; n];
     let mut len = vec![0u32; n];
     let quota: Vec<usize> = (0..n).map(|w| episodes / n + (w < episodes % n) as usize).collect();
@@ -151,5 +156,6 @@ pub fn evaluate(
         mean_return: ret_sum / done as f64,
         mean_joint_torque_norm: if torque_count > 0 { torque_sum / torque_count as f64 } else { f64::NAN },
         ended_by,
+        identical_starts,
     }
 }

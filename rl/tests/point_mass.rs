@@ -65,6 +65,7 @@ fn ppo_learns_point_mass_reaching() {
         t.env_steps, last.success_rate
     );
     assert_eq!(report.episodes, 1024);
+    assert!(!report.identical_starts, "the point mass draws its starts");
     assert_eq!(report.ended_by.0.values().sum::<usize>(), 1024, "{:?}", report.ended_by);
     assert_eq!(report.ended_by.0.get("success").copied().unwrap_or(0) as f64 / 1024.0, report.success_rate);
     assert!(report.success_rate > 0.95, "evaluation success {:.3} <= 0.95", report.success_rate);

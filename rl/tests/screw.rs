@@ -60,3 +60,23 @@ fn a_device_rollout_of_the_franka_env_is_refused_by_name() {
     let t = Trainer::new(quick(&["train.env_count=2", "ppo.minibatch_size=16"]), Device::flex()).unwrap();
     assert!(!t.run.on_device(), "auto keeps the Franka env on the host");
 }
+
+/// Screw has no reset randomisation (IsaacGymEnvs): every world starts from the same observation, and the
+/// evaluation says so (factory-eval then notes that mean actions play one episode in every world).
+#[test]
+fn screw_evaluation_reports_identical_starts() {
+    let sets = ["train.env_count=2", "ppo.minibatch_size=16", "env.max_episode_steps=3"];
+    let t = Trainer::new(quick(&sets), Device::flex()).unwrap();
+    let dir = std::env::temp_dir().join(format!("factory-rl-screw-eval-{}", std::process::id()));
+    let path = dir.join("policy.json");
+    t.export_policy(&path).unwrap();
+    let p = factory_rl::checkpoint::PolicyFile::load(&path).unwrap();
+    let (model, norm) = p.build(&Device::flex(), &path).unwrap();
+    let mut env = factory_envs::build(&p.env_config, 2, 1).unwrap();
+    let opts = factory_rl::eval::EvalOptions::default();
+    let r =
+        factory_rl::eval::evaluate(env.as_mut(), &model, norm.as_ref(), p.observation_clip, 2, &Device::flex(), opts);
+    assert!(r.identical_starts && !r.stochastic, "{r:?}");
+    assert_eq!(r.ended_by.0.get("time_limit"), Some(&2), "{r:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}

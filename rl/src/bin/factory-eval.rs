@@ -76,6 +76,13 @@ fn main() -> Result<()> {
     if let Some(path) = &args.steps_csv {
         factory_rl::checkpoint::write_atomic(path, steps.to_csv().as_bytes())?;
     }
+    if report.identical_starts && !report.stochastic && args.envs > 1 && !args.json {
+        eprintln!(
+            "note: every world started from the same observation and acts with the policy's mean, so every \
+             episode is the same one (the env has no reset randomisation); --stochastic samples actions as \
+             training does"
+        );
+    }
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
