@@ -86,6 +86,8 @@ fn stagger_error(e: factory_envs::EnvError) -> RlError {
 }
 
 /// The env a run steps and its episode bookkeeping: on the host, or on the learner's device.
+// One per trainer: the variants' size difference costs nothing.
+#[allow(clippy::large_enum_variant)]
 pub enum EnvRun {
     /// A host env: its observations are uploaded and its actions read back every step.
     Host {
@@ -318,13 +320,10 @@ impl Trainer {
         if ck.meta.observation.len() != expected {
             return Err(bad(format!("observation of length {}, the env has {expected}", ck.meta.observation.len())));
         }
-        match &ck.env_state {
-            Some(state) => {
-                let m = &ck.meta;
-                t.run.restore(state, &m.observation, &m.running_return, &m.running_length)?;
-            }
-            // The env cannot restore its worlds: they start fresh episodes (already reset by `new`).
-            None => {}
+        // Without a saved env state (the env cannot save one) the worlds start fresh episodes (reset by `new`).
+        if let Some(state) = &ck.env_state {
+            let m = &ck.meta;
+            t.run.restore(state, &m.observation, &m.running_return, &m.running_length)?;
         }
         t.updates_done = ck.meta.updates_done;
         t.env_steps = ck.meta.env_steps;
