@@ -259,6 +259,27 @@ impl TrainConfig {
     }
 }
 
+/// `env` with `env.key=value` overrides applied (factory-eval's `--set`: evaluate a policy on, say, the
+/// paper's Table III reset ranges); keys outside `env.` are refused by name, and the result is checked as a
+/// config's `[env]` is.
+pub fn env_with_sets(env: &EnvConfig, sets: &[String]) -> Result<EnvConfig> {
+    let mut root = toml::Value::Table(Default::default());
+    let table =
+        toml::Value::try_from(env).map_err(|e| RlError::Config { file: "env".into(), reason: e.to_string() })?;
+    root.as_table_mut().expect("a table").insert("env".into(), table);
+    for set in sets {
+        if !set.trim_start().starts_with("env.") {
+            return Err(RlError::Config {
+                file: format!("--set {set}"),
+                reason: "only env.* keys can be set here (the policy fixes the rest)".into(),
+            });
+        }
+        apply_set(&mut root, set)?;
+    }
+    let env = root.get("env").cloned().expect("set above");
+    EnvConfig::from_toml(env).map_err(|e| RlError::Config { file: "--set".into(), reason: format!("[env]: {e}") })
+}
+
 /// Applies one `a.b.c=value` override to a TOML tree.
 fn apply_set(root: &mut toml::Value, set: &str) -> Result<()> {
     let err = |reason: String| RlError::Config { file: format!("--set {set}"), reason };
@@ -319,6 +340,19 @@ mod tests {
         assert_eq!(c.ppo.device, DeviceChoice::Cpu);
         let e = TrainConfig::from_str_with(MIN, "t.toml", &["ppo.minibatch_size=100000".into()]).unwrap_err();
         assert!(e.to_string().contains("ppo.minibatch_size"), "{e}");
+    }
+
+    #[test]
+    fn env_sets_apply_to_the_env_only() {
+        let cfg = TrainConfig::from_str_with(MIN, "t", &[]).unwrap();
+        let sets = ["env.max_episode_steps=7".to_string()];
+        let env = env_with_sets(&cfg.env, &sets).unwrap();
+        let EnvConfig::PointMass(c) = &env else { panic!("{env:?}") };
+        assert_eq!(c.max_episode_steps, 7);
+        let e = env_with_sets(&cfg.env, &["ppo.horizon=3".into()]).unwrap_err().to_string();
+        assert!(e.contains("ppo.horizon") && e.contains("env."), "{e}");
+        let e = env_with_sets(&cfg.env, &["env.max_episode_step=3".into()]).unwrap_err().to_string();
+        assert!(e.contains("max_episode_step"), "{e}");
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! `factory-eval --policy FILE [--episodes 1024] [--envs 128] [--config FILE] [--seed S] [--stochastic]
+//! `factory-eval --policy FILE [--episodes 1024] [--envs 128] [--config FILE] [--set env.KEY=VALUE]... [--seed S] [--stochastic]
 //! [--forces-csv FILE] [--steps-csv FILE] [--json]`: runs an exported policy (its mean action; `--stochastic` samples with its sigma, as training
 //! does) and reports the columns of the paper's Tables IV and X-XII (success
 //! rate, mean env steps to success). The env is rebuilt from the policy file's own env config, or from
@@ -27,6 +27,9 @@ struct Args {
     /// Take the env from this training config instead of the policy file.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// Override an env key, e.g. `--set 'env.randomize.hand_angle_deg=[-90, 90]'` (repeatable; env.* only).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    sets: Vec<String>,
     /// Seed of the env's draws.
     #[arg(long, default_value_t = 12345)]
     seed: u64,
@@ -52,6 +55,7 @@ fn main() -> Result<()> {
         Some(c) => TrainConfig::load(c, &[])?.env,
         None => policy.env_config.clone(),
     };
+    let env_cfg = factory_rl::config::env_with_sets(&env_cfg, &args.sets)?;
     let mut env = factory_envs::build(&env_cfg, args.envs, args.seed).context("building the env")?;
     policy.check_spec(env.spec(), &args.policy)?;
     let device = burn::tensor::Device::flex();
