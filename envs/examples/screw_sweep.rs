@@ -110,7 +110,7 @@ fn main() {
             let runs: Vec<_> = (0..repeat).map(|r| ended[r * combos + i * yaws.len() + j]).collect();
             let mut causes = factory_envs::EndCauses::default();
             for (_, c, _) in runs.iter().flatten() {
-                *causes.0.entry(c.to_string()).or_default() += 1;
+                causes.add(c, 1);
             }
             let ok: Vec<usize> = runs.iter().flatten().filter(|x| x.1 == "success").map(|x| x.0).collect();
             let mean_len = ok.iter().sum::<usize>() as f32 / ok.len().max(1) as f32;

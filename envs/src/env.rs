@@ -105,8 +105,20 @@ impl EndCauses {
     /// Counts `world`'s episode if it ended this step.
     pub fn record(&mut self, buf: &StepBuffers, world: usize) {
         if let Some(c) = buf.end_cause(world) {
-            *self.0.entry(c.to_string()).or_default() += 1;
+            self.add(c, 1);
         }
+    }
+
+    /// Counts `count` episodes that ended by `cause` (none: no entry).
+    pub fn add(&mut self, cause: &str, count: usize) {
+        if count > 0 {
+            *self.0.entry(cause.to_string()).or_default() += count;
+        }
+    }
+
+    /// Episodes counted, all causes.
+    pub fn total(&self) -> usize {
+        self.0.values().sum()
     }
 
     /// `name=count` pairs separated by spaces (`slipped=2 success=14`); empty when none ended.

@@ -58,7 +58,7 @@ impl PointMassDevice {
         let a = self.cfg.arena;
         let n = self.spec.env_count;
         let v: Vec<f32> = (0..2 * n).map(|_| (2.0 * self.rng.unit() - 1.0) * a).collect();
-        Tensor::<1>::from_floats(v.as_slice(), &self.device).reshape([n, 2])
+        self.upload(&v, 2)
     }
 
     fn upload(&self, v: &[f32], cols: usize) -> Tensor<2> {

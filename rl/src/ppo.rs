@@ -135,6 +135,18 @@ impl DeviceEpisodes {
         let device = self.totals.device();
         std::mem::replace(&mut self.totals, Tensor::zeros([5], &device))
     }
+
+    /// How the episodes of read-back [`totals`](Self::totals) ended: `success`, `time_limit` and, for the
+    /// rest, `failure` (a device env names no causes).
+    pub fn ended_by(totals: &[f32]) -> EndCauses {
+        let (ended, succeeded, truncated) =
+            (totals[0].round() as usize, totals[1].round() as usize, totals[4].round() as usize);
+        let mut causes = EndCauses::default();
+        causes.add("success", succeeded);
+        causes.add("time_limit", truncated);
+        causes.add("failure", ended.saturating_sub(succeeded + truncated));
+        causes
+    }
 }
 
 /// What a rollout accumulates per step before it is stacked.

@@ -120,6 +120,15 @@ impl EnvRun {
         matches!(self, EnvRun::Device { .. })
     }
 
+    /// Where the env runs, for logs: "the learner's device" or "the host".
+    pub fn place(&self) -> &'static str {
+        if self.on_device() {
+            "the learner's device"
+        } else {
+            "the host"
+        }
+    }
+
     /// The current observations (read back from the device for a device env), shape [env_count * obs_dim].
     pub fn observation(&self) -> Vec<f32> {
         match self {
@@ -196,8 +205,8 @@ pub struct UpdateReport {
 #[derive(Clone, Debug)]
 pub struct RecentEpisodes {
     window: usize,
-    /// Per update in the window: episodes ended, of them succeeded, and how they ended.
-    updates: std::collections::VecDeque<(usize, usize, EndCauses)>,
+    /// How each update's episodes in the window ended.
+    updates: std::collections::VecDeque<EndCauses>,
 }
 
 impl RecentEpisodes {
@@ -208,8 +217,7 @@ impl RecentEpisodes {
 
     /// Adds an update's episodes, dropping the oldest beyond the window.
     pub fn push(&mut self, r: &UpdateReport) {
-        let succeeded = r.ended_by.0.get("success").copied().unwrap_or(0);
-        self.updates.push_back((r.episodes, succeeded, r.ended_by.clone()));
+        self.updates.push_back(r.ended_by.clone());
         while self.updates.len() > self.window {
             self.updates.pop_front();
         }
@@ -219,20 +227,16 @@ impl RecentEpisodes {
     /// limits by cause; `no episode ended in the last N updates` when none did.
     pub fn summary(&self) -> String {
         let n = self.updates.len();
-        let episodes: usize = self.updates.iter().map(|u| u.0).sum();
+        let mut all = EndCauses::default();
+        for (cause, count) in self.updates.iter().flat_map(|c| c.0.iter()) {
+            all.add(cause, *count);
+        }
+        let episodes = all.total();
         if episodes == 0 {
             return format!("no episode ended in the last {n} updates");
         }
-        let succeeded: usize = self.updates.iter().map(|u| u.1).sum();
-        let mut causes = EndCauses::default();
-        for (_, _, c) in &self.updates {
-            for (k, v) in &c.0 {
-                if k != "success" {
-                    *causes.0.entry(k.clone()).or_default() += v;
-                }
-            }
-        }
-        let rest = causes.0.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ");
+        let succeeded = all.0.remove("success").unwrap_or(0);
+        let rest = all.0.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ");
         format!(
             "success {:.1}% of {episodes} episodes in the last {n} updates{}",
             100.0 * succeeded as f64 / episodes as f64,
@@ -347,18 +351,11 @@ impl Trainer {
             EnvRun::Device { env, obs, episodes } => {
                 let rollout = self.ppo.collect_device(env.as_mut(), obs, episodes);
                 let t1 = Instant::now();
-                // The tallies come back with the update's summary: [ended, succeeded, return sum, length
-                // sum, truncated].
+                // The tallies come back with the update's summary (`DeviceEpisodes::totals`).
                 let (stats, t) = self.ppo.update_with(rollout, Some(episodes.take()));
-                let (k, succ, truncated) = (t[0].round() as usize, t[1].round() as usize, t[4].round() as usize);
-                let mut ended_by = EndCauses::default();
-                let failed = k.saturating_sub(succ + truncated);
-                for (cause, count) in [("success", succ), ("time_limit", truncated), ("failure", failed)] {
-                    if count > 0 {
-                        ended_by.0.insert(cause.into(), count);
-                    }
-                }
-                (t1, stats, k, succ, t[2] as f64, ended_by)
+                let ended_by = DeviceEpisodes::ended_by(&t);
+                let succ = ended_by.0.get("success").copied().unwrap_or(0);
+                (t1, stats, ended_by.total(), succ, t[2] as f64, ended_by)
             }
         };
         let t2 = Instant::now();

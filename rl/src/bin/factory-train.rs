@@ -62,8 +62,7 @@ fn main() -> Result<()> {
             if let Some(u) = args.updates {
                 t.cfg.train.updates = u;
             }
-            let at = if t.run.on_device() { "the learner's device" } else { "the host" };
-            eprintln!("resuming {} at update {} on {name}; env on {at}", run.display(), t.updates_done);
+            eprintln!("resuming {} at update {} on {name}; env on {}", run.display(), t.updates_done, t.run.place());
             (t, run.clone())
         }
         None => {
@@ -93,8 +92,7 @@ fn main() -> Result<()> {
             std::fs::create_dir_all(&run).with_context(|| format!("creating {}", run.display()))?;
             let (device, name) = resolve_device(cfg.ppo.device)?;
             let t = Trainer::new(cfg, device)?;
-            let at = if t.run.on_device() { "the learner's device" } else { "the host" };
-            eprintln!("run {} on {name}; env on {at}", run.display());
+            eprintln!("run {} on {name}; env on {}", run.display(), t.run.place());
             (t, run)
         }
     };
