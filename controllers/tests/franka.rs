@@ -170,7 +170,7 @@ fn table_scene(gap: f32, q: &[f32; 9]) -> (ArticulatedSim, Frame, usize) {
 /// The force the finger pads exert on the table [N] (world frame): the opposite of the table's push on
 /// the pads, over the pad-table pairs (every pair of this scene but none other).
 fn force_on_table(sim: &ArticulatedSim, pairs: usize) -> Vec3 {
-    -(0..pairs).map(|p| sim.pair_force(0, p)).sum::<Vec3>()
+    -(0..pairs).map(|p| sim.pair_force(GpuContext::global().unwrap(), 0, p)).sum::<Vec3>()
 }
 
 /// Runs `ctrl` on the table scene for `seconds`, the targets from `target(t, hold)`; the measured wrench

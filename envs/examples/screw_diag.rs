@@ -7,6 +7,7 @@
 //! GRASP_HEIGHT, FINGER_KP, FINGER_KD, START_ENGAGED, BOLT_TIP_CHAMFER. DUMP=t1,t2,... prints the pad
 //! contacts at those steps; FK_START prints where Q_START puts the fingertip and exits.
 
+use factory_engine::gpu::GpuContext;
 use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
 
 /// Where the finger-force observation starts: after the 26 of fingertip and nut pose and twist.
@@ -76,7 +77,10 @@ fn main() {
             let pc = s.sim.model.contacts.pairs.len();
             if let Some(c) = &s.sim.contacts {
                 for p in (0..pc).filter(|&p| p != s.thread_pair) {
-                    println!("  pair {p} force on the query shape {:?} N", s.sim.pair_force(0, p));
+                    println!(
+                        "  pair {p} force on the query shape {:?} N",
+                        s.sim.pair_force(GpuContext::global().unwrap(), 0, p)
+                    );
                     for patch in &c.patches[p] {
                         println!("  pair {p} patch n {:?} area {:.2e}", patch.normal, patch.area);
                         for k in &patch.contacts {

@@ -57,13 +57,14 @@ use crate::gpu::{Binding, ExplicitLayout, GpuContext};
 use bytemuck::{Pod, Zeroable};
 use glam::{Quat, Vec3, Vec4};
 
-pub(crate) const ARTICULATION_WGSL: &str = include_str!("articulation.wgsl");
+pub(crate) const ARTICULATION_WGSL: &str =
+    concat!(include_str!("articulation.wgsl"), include_str!("articulation_core.wgsl"));
 
 /// Invocations (worlds) per workgroup (articulation.wgsl's `@workgroup_size`).
 pub const ARTICULATION_WG: u32 = 64;
-/// Most degrees of freedom per articulation (articulation.wgsl's MAX_DOFS: private arrays are sized by it).
+/// Most degrees of freedom per articulation (articulation_core.wgsl's MAX_DOFS: private arrays are sized by it).
 pub const MAX_DOFS: usize = 16;
-/// Most links per articulation (articulation.wgsl's MAX_LINKS).
+/// Most links per articulation (articulation_core.wgsl's MAX_LINKS).
 pub const MAX_LINKS: usize = 32;
 
 /// Joint codes of [`LinkGpu::joint`].
@@ -76,7 +77,7 @@ const JOINT_PRISMATIC: u32 = 2;
 /// clamps and compares the same as infinity on every finite value.
 const NO_LIMIT: f32 = f32::MAX;
 
-/// GPU mirror of `Params` in articulation.wgsl (a uniform).
+/// GPU mirror of `ArtParams` in articulation_core.wgsl (a uniform).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct ArticulationParamsGpu {
@@ -110,7 +111,7 @@ pub struct ArticulationParamsGpu {
     pub coriolis_offset: u32,
 }
 
-/// GPU mirror of `Link` in articulation.wgsl: one link of the model, shared by every world (128 bytes).
+/// GPU mirror of `Link` in articulation_core.wgsl: one link of the model, shared by every world (128 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct LinkGpu {
@@ -134,7 +135,7 @@ pub struct LinkGpu {
     pub _pad: u32,
 }
 
-/// GPU mirror of `Dof` in articulation.wgsl: one degree of freedom's limits and joint parameters (32 bytes).
+/// GPU mirror of `Dof` in articulation_core.wgsl: one degree of freedom's limits and joint parameters (32 bytes).
 /// Absent limits are [`f32::MAX`] (see `NO_LIMIT`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
@@ -318,7 +319,42 @@ pub fn validate(model: &ArticulationModel, world_count: u32, frame: &Frame, dt: 
     Ok(())
 }
 
-/// Loop passes one invocation makes in articulation.wgsl: (one `step` of `substeps` substeps, one
+/// Loop passes of one substep of articulation_core.wgsl (forward kinematics, free_velocity,
+/// integrate_positions) and of one cholesky_substitute, counted as [`loop_passes`] counts.
+pub(crate) fn substep_loop_passes(model: &ArticulationModel) -> (u64, u64) {
+    let (nl, n) = (model.link_count() as u64, model.dof_count() as u64);
+    let cholesky: u64 = (n + 1) + (0..n).map(|j| (j + 1) + (n - j) + (n - j - 1) * (j + 1)).sum::<u64>();
+    let substitute: u64 = 2 * ((n + 1) + (0..n).map(|i| i + 1).sum::<u64>());
+    let substep = (nl + 1) + mass_matrix_passes(model) + 2 * (nl + 1) + (n + 1) + cholesky + substitute + 2 * (n + 1);
+    (substep, substitute)
+}
+
+/// Links on the path from `l` to the root, and the dofs among them.
+pub(crate) fn chain_len(model: &ArticulationModel, l: u32) -> (u64, u64) {
+    let (mut links, mut dofs, mut a) = (0, 0, l);
+    while a != NO_LINK {
+        links += 1;
+        dofs += (model.link_dof[a as usize] != NO_DOF) as u64;
+        a = model.link_parent[a as usize];
+    }
+    (links, dofs)
+}
+
+fn mass_matrix_passes(model: &ArticulationModel) -> u64 {
+    let (nl, n) = (model.link_count() as u64, model.dof_count() as u64);
+    (n * n + 1)
+        + (nl + 1)
+        + (0..nl as u32)
+            .filter(|&l| model.link_mass[l as usize] > 0.0)
+            .map(|l| {
+                let (links, k) = chain_len(model, l);
+                (links + 1) + (k + 1) + k * (k + 1) / 2 + k
+            })
+            .sum::<u64>()
+        + (n + 1)
+}
+
+/// Loop passes one invocation makes in articulation.wgsl (and articulation_core.wgsl): (one `step` of `substeps` substeps, one
 /// `dynamics` at `frame`), each loop of p passes counted p + 1 as llvmpipe counts them; keep it in step
 /// with the shader's loops. For the Franka: 885 per substep (1791 for a step of 2) and 760 for `dynamics`.
 /// Checked on this machine's lavapipe with the budget lifted: a Franka step matched the CPU up to 72
@@ -326,30 +362,10 @@ pub fn validate(model: &ArticulationModel, world_count: u32, frame: &Frame, dt: 
 /// under llvmpipe's, well inside the 1/8 of the limit [`ArticulationGpu::new`] keeps in reserve.
 pub fn loop_passes(model: &ArticulationModel, frame: &Frame, substeps: u32) -> (u64, u64) {
     let (nl, n) = (model.link_count() as u64, model.dof_count() as u64);
-    // Links on the path from l to the root, and the dofs among them.
-    let chain = |l: u32| -> (u64, u64) {
-        let (mut links, mut dofs, mut a) = (0, 0, l);
-        while a != NO_LINK {
-            links += 1;
-            dofs += (model.link_dof[a as usize] != NO_DOF) as u64;
-            a = model.link_parent[a as usize];
-        }
-        (links, dofs)
-    };
-    let mass_matrix: u64 = (n * n + 1)
-        + (nl + 1)
-        + (0..nl as u32)
-            .filter(|&l| model.link_mass[l as usize] > 0.0)
-            .map(|l| {
-                let (links, k) = chain(l);
-                (links + 1) + (k + 1) + k * (k + 1) / 2 + k
-            })
-            .sum::<u64>()
-        + (n + 1);
+    let chain = |l: u32| chain_len(model, l);
+    let mass_matrix = mass_matrix_passes(model);
     let inverse_dynamics = 2 * (nl + 1);
-    let cholesky: u64 = (n + 1) + (0..n).map(|j| (j + 1) + (n - j) + (n - j - 1) * (j + 1)).sum::<u64>();
-    let substitute: u64 = 2 * ((n + 1) + (0..n).map(|i| i + 1).sum::<u64>());
-    let substep = (nl + 1) + mass_matrix + inverse_dynamics + (n + 1) + cholesky + substitute + 2 * (n + 1);
+    let (substep, _) = substep_loop_passes(model);
     let step = 2 * (n + 1) + substeps as u64 * substep + substeps as u64 + 1;
     let (frame_links, frame_dofs) = chain(frame.link);
     let dynamics = (n + 1)
@@ -699,7 +715,7 @@ mod tests {
         assert_eq!(size, std::mem::size_of::<LinkGpu>());
         assert_eq!(offsets, [0, 16, 32, 48, 64, 112, 116, 120, 124]);
         assert_eq!(layout_of("Dof").0, std::mem::size_of::<DofGpu>());
-        let (size, offsets) = layout_of("Params");
+        let (size, offsets) = layout_of("ArtParams");
         assert_eq!(size, std::mem::size_of::<ArticulationParamsGpu>());
         assert_eq!(offsets, [0, 4, 8, 12, 16, 32, 48, 64, 68, 72, 76, 80, 84, 88, 92]);
     }

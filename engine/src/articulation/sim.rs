@@ -1,8 +1,13 @@
 //! Worlds with an articulation and free bodies, stepped frame by frame: contacts generated and reduced
-//! on the GPU (or lavapipe) at each frame's start, then the mixed-coordinate Gauss-Seidel step of
-//! [`crate::solver::step_cpu_articulated`] on the host. The link bodies' poses in the state always
-//! follow the joints (forward kinematics), so the contact pipeline sees the fingers where the joints put
-//! them.
+//! on the GPU (or lavapipe) at each frame's start, then the mixed-coordinate Gauss-Seidel step, on the
+//! host ([`crate::solver::step_cpu_articulated`], the default) or on the device
+//! ([`crate::solver::articulated::GpuArticulatedSolver`], [`ArticulatedSim::use_device_solver`]). The link
+//! bodies' poses in the state always follow the joints (forward kinematics), so the contact pipeline sees
+//! the fingers where the joints put them.
+//!
+//! On the device the state still comes back to the host every frame (bodies and joints: a few KiB), so
+//! the host may read and edit it between frames as with the host solve; the contacts and the warm-start
+//! rows stay on the device ([`ArticulatedSim::read_contacts`] reads the contacts when asked).
 
 use super::dynamics::forward_kinematics;
 use super::{ArticulationControl, ArticulationModel, ArticulationState};
@@ -10,6 +15,7 @@ use crate::builder::Model;
 use crate::contact::{ContactConfig, ContactPipeline, ContactsHost, TransformGpu};
 use crate::error::{EngineError, Result};
 use crate::gpu::GpuContext;
+use crate::solver::articulated::GpuArticulatedSolver;
 use crate::solver::{step_cpu_articulated, ArticulationStep, BodyState, Control, SolverConfig, WarmStart};
 use glam::{Quat, Vec3};
 
@@ -23,13 +29,17 @@ pub struct ArticulatedSim {
     pub state: BodyState,
     /// Joint positions and velocities, shape [world_count * dof_count].
     pub joints: ArticulationState,
+    /// The host solve's warm start (unused while the device solves: its rows stay there).
     pub warm: WarmStart,
-    /// The contacts of the last frame (generated at its start).
+    /// The contacts of the last frame (generated at its start); None while the device solves (see
+    /// [`read_contacts`](Self::read_contacts)).
     pub contacts: Option<ContactsHost>,
     /// Wall time of the last frame's contact handling (generation, reduction and readback) and of its
     /// coupled solve [s].
     pub last_handling_s: f64,
     pub last_solve_s: f64,
+    /// The coupled solve on the device, once [`use_device_solver`](Self::use_device_solver) built it.
+    device: Option<GpuArticulatedSolver>,
 }
 
 impl ArticulatedSim {
@@ -85,6 +95,7 @@ impl ArticulatedSim {
             contacts: None,
             last_handling_s: 0.0,
             last_solve_s: 0.0,
+            device: None,
         };
         sim.sync_links();
         Ok(sim)
@@ -110,10 +121,47 @@ impl ArticulatedSim {
         }
     }
 
+    /// Solves on the device from the next frame on ([`GpuArticulatedSolver`]); every world starts cold
+    /// there (no warm start carried over from the host's rows). Refuses what
+    /// [`GpuArticulatedSolver::new`] refuses.
+    pub fn use_device_solver(&mut self, gpu: &GpuContext) -> Result<()> {
+        let dev = GpuArticulatedSolver::new(gpu, &self.pipe, &self.model.bodies, &self.articulation, &self.solver)?;
+        dev.write_state(gpu, &self.pipe, &self.state, &self.joints)?;
+        self.device = Some(dev);
+        Ok(())
+    }
+
+    /// Whether the coupled solve runs on the device.
+    pub fn on_device(&self) -> bool {
+        self.device.is_some()
+    }
+
+    /// Forgets world `w`'s warm start (after the caller reset it: last frame's impulses belong to contacts
+    /// that no longer exist), wherever the solve runs.
+    pub fn forget_world(&mut self, gpu: &GpuContext, w: usize) {
+        self.warm.clear_world(w);
+        if let Some(dev) = &self.device {
+            dev.forget_world(gpu, w as u32);
+        }
+    }
+
+    /// The contacts generated at the last frame's start (read back from the device when it solves there).
+    pub fn read_contacts(&self, gpu: &GpuContext) -> ContactsHost {
+        match &self.contacts {
+            Some(c) => c.clone(),
+            None => self.pipe.read(gpu),
+        }
+    }
+
     /// One frame: contacts at the current poses, then the coupled step under the body wrenches `control`
     /// and the joint torques and drive targets `joint_control`. Returns per world whether it diverged
     /// (non-finite or over the solver's speed bound): such a world is left for the caller to reset.
+    /// Panics if a control's shape is not [world_count * body_count] / [world_count * dof_count] (or
+    /// empty).
     pub fn step(&mut self, gpu: &GpuContext, control: &Control, joint_control: &ArticulationControl) -> Vec<bool> {
+        if self.device.is_some() {
+            return self.step_device(gpu, control, joint_control);
+        }
         let start = std::time::Instant::now();
         self.pipe.write_body_q(gpu, &self.state.body_q);
         self.pipe.run(gpu);
@@ -135,9 +183,38 @@ impl ArticulatedSim {
         ok.into_iter().map(|ok| !ok).collect()
     }
 
+    /// [`step`](Self::step) on the device: the state up, contacts and the coupled step in two submissions
+    /// (waited for in between, so the two times are apart), the state back.
+    fn step_device(&mut self, gpu: &GpuContext, control: &Control, joint_control: &ArticulationControl) -> Vec<bool> {
+        let dev = self.device.as_mut().expect("device solver");
+        let start = std::time::Instant::now();
+        dev.upload(gpu, &self.pipe, &self.state, &self.joints).expect("the state keeps the shapes new() checked");
+        if let Err(e) = dev.write_control(gpu, control, joint_control) {
+            panic!("ArticulatedSim::step: {e}");
+        }
+        self.pipe.run(gpu);
+        gpu.wait();
+        let handled = std::time::Instant::now();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        dev.encode(&mut enc);
+        gpu.queue.submit([enc.finish()]);
+        let (state, joints, ok) = dev.read_state(gpu, &self.pipe);
+        self.state = state;
+        self.joints = joints;
+        self.contacts = None;
+        self.last_handling_s = (handled - start).as_secs_f64();
+        self.last_solve_s = handled.elapsed().as_secs_f64();
+        ok.into_iter().map(|ok| !ok).collect()
+    }
+
     /// The mean contact force [N] on pair `pair`'s query shape in world `world` over the last substep
-    /// (world frame; the SDF shape's body felt the opposite).
-    pub fn pair_force(&self, world: usize, pair: usize) -> Vec3 {
-        self.warm.pair_impulse(world, pair) * (self.solver.substeps as f32 / self.solver.dt)
+    /// (world frame; the SDF shape's body felt the opposite). On the device this reads the world's rows
+    /// back (waits for the GPU).
+    pub fn pair_force(&self, gpu: &GpuContext, world: usize, pair: usize) -> Vec3 {
+        let impulse = match &self.device {
+            Some(dev) => dev.pair_impulse(gpu, world as u32, pair as u32),
+            None => self.warm.pair_impulse(world, pair),
+        };
+        impulse * (self.solver.substeps as f32 / self.solver.dt)
     }
 }

@@ -10,6 +10,7 @@ use bytemuck::{Pod, Zeroable};
 
 pub(crate) const SOLVER_WGSL: &str = concat!(
     include_str!("solver.wgsl"),
+    include_str!("solver_sweep.wgsl"),
     include_str!("solver_core.wgsl"),
     include_str!("../contact/sdf_sample.wgsl"),
     include_str!("../sdf/thread.wgsl"),

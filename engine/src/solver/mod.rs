@@ -41,6 +41,7 @@
 //! contact rows are anchored at the frame's start and re-sampled at every sweep, which is what TGS's
 //! linearised separation buys elsewhere.
 
+pub mod articulated;
 pub mod gpu;
 
 use crate::articulation::{dynamics, ArticulationControl, ArticulationModel, ArticulationState};

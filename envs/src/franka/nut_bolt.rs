@@ -604,7 +604,7 @@ impl FrankaNutBolt {
             put(&v.nut_angvel.to_array());
             if self.cfg.observe_finger_force {
                 for &(pair, nut_is_query) in &self.pad_pairs {
-                    let f = self.scene.sim.pair_force(w, pair);
+                    let f = self.scene.sim.pair_force(self.gpu, w, pair);
                     put(&(if nut_is_query { f } else { -f }).to_array());
                 }
             }
@@ -649,14 +649,14 @@ impl FrankaNutBolt {
         let mut forces = Vec::new();
         for (name, &(pair, nut_is_query)) in ["left_finger", "right_finger"].iter().zip(&self.pad_pairs) {
             let f: Vec<Vec3> =
-                (0..n).map(|w| sim.pair_force(w, pair) * if nut_is_query { 1.0 } else { -1.0 }).collect();
+                (0..n).map(|w| sim.pair_force(self.gpu, w, pair) * if nut_is_query { 1.0 } else { -1.0 }).collect();
             for w in 0..n {
                 on_nut[w] += f[w];
             }
             forces.push((name.to_string(), f.iter().map(|x| x.length()).collect()));
         }
         // The thread pair's query shape is the nut: the force on it from the bolt.
-        let bolt: Vec<Vec3> = (0..n).map(|w| sim.pair_force(w, self.scene.thread_pair)).collect();
+        let bolt: Vec<Vec3> = (0..n).map(|w| sim.pair_force(self.gpu, w, self.scene.thread_pair)).collect();
         for w in 0..n {
             on_nut[w] += bolt[w];
         }
