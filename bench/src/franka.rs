@@ -53,6 +53,16 @@ pub const TARGET_YAW_RATE: f32 = 2.0;
 /// Pads' bottom (the fingertip frame) above the nut's bottom while holding it [m].
 const GRASP_HEIGHT: f32 = 0.002;
 
+/// Where the arm, fingers and parts are solved together.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CoupledSolve {
+    /// The host reference, `solver::step_cpu_articulated` (rayon over worlds).
+    Host,
+    /// The device kernel, `solver::articulated` (lavapipe where there is no GPU).
+    Device,
+}
+
 /// Settings of one run.
 #[derive(Clone, Debug)]
 pub struct FrankaNutBoltRun {
@@ -73,6 +83,8 @@ pub struct FrankaNutBoltRun {
     /// on the crest and the pads slipped on it or it jammed part-way down: 47 of 64 worlds seated against
     /// 64 of 64 with the chamfer (seed 1, 2026-12-04, docs/BENCHMARKS.md).
     pub bolt_tip_chamfer: bool,
+    /// Where the coupled solve runs (default: the device).
+    pub solve: CoupledSolve,
     /// Print world `trace_world`'s stage, fingertip and nut to stderr every this many frames (0: never).
     pub trace_every: u32,
     pub trace_world: usize,
@@ -101,6 +113,7 @@ impl Default for FrankaNutBoltRun {
             thread_mu: 0.3,
             finger_drive: [2000.0, 50.0],
             bolt_tip_chamfer: true,
+            solve: CoupledSolve::Device,
             trace_every: 0,
             trace_world: 0,
         }
@@ -118,6 +131,8 @@ pub struct FrankaNutBoltReport {
     pub pos_iters: u32,
     pub vel_iters: u32,
     pub dt: f32,
+    /// Where the coupled solve ran.
+    pub solve: CoupledSolve,
     /// Worlds whose nut ended within one pitch of seated, of all worlds.
     pub success_rate: f64,
     /// Mean simulated time to success over the successful worlds [s].
@@ -130,10 +145,13 @@ pub struct FrankaNutBoltReport {
     /// Contact pairs per world and query triangles of the nut.
     pub pairs_per_world: usize,
     pub nut_triangles: usize,
-    /// Mean contacts per world per frame after reduction (Table I/II: "contacts after").
+    /// Mean contacts per world per frame after reduction (Table I/II: "contacts after"); with the device
+    /// solve, over every [`DEVICE_STATS_EVERY`]-th frame (the contacts are read back for it).
     pub contacts_per_world: f64,
-    /// Wall time over the frames [s] and per frame [ms]: contact handling (GPU or lavapipe, with the
-    /// readback) and the coupled solve and controller (host), as Table II's columns.
+    /// Wall time over the frames [s] and per frame [ms]: contact handling (GPU or lavapipe; with the host
+    /// solve, with the contacts' readback), the coupled solve (host or device, with the state's upload and
+    /// readback) and the controller (host), as Table II's columns. The device's contact statistics'
+    /// readbacks are not counted.
     pub wall_s: f64,
     pub ms_per_frame: f64,
     pub handling_ms_per_frame: f64,
@@ -232,7 +250,10 @@ impl FrankaNutBolt {
             },
             ArticulationState::replicate(&Q_START, worlds),
         )?;
-        let NutBoltScene { sim, nb, tip, nut, .. } = scene;
+        let NutBoltScene { mut sim, nb, tip, nut, .. } = scene;
+        if run.solve == CoupledSolve::Device {
+            sim.use_device_solver(gpu)?;
+        }
         let nut_triangles = nb.nut.mesh.triangle_count();
         let arm = ArmBatch::from_articulation(&sim.articulation, &sim.joints, &tip, 7, &[]);
         let down = Quat::from_rotation_z(-finger_yaw(arm.ee_quat[0])) * arm.ee_quat[0];
@@ -391,6 +412,9 @@ fn close(p: Vec3, yaw: f32, goal: Vec3, goal_yaw: f32, tol: f32, yaw_tol: f32) -
     p.distance(goal) < tol && wrap(yaw - goal_yaw).abs() < yaw_tol
 }
 
+/// With the device solve, the contact statistics read the contacts back every this many frames.
+pub const DEVICE_STATS_EVERY: u32 = 10;
+
 /// Runs the scripted scene and measures it.
 pub fn run_franka_nut_bolt(gpu: &GpuContext, run: &FrankaNutBoltRun) -> Result<FrankaNutBoltReport> {
     ensure!(run.seconds > 0.0 && run.seconds.is_finite(), "--seconds must be > 0, got {}", run.seconds);
@@ -403,6 +427,7 @@ pub fn run_franka_nut_bolt(gpu: &GpuContext, run: &FrankaNutBoltRun) -> Result<F
     let mut diverged = vec![false; worlds];
     let start = Instant::now();
     let mut frames_run = 0;
+    let (mut stats_frames, mut stats_s) = (0u32, 0.0f64);
     for f in 0..frames {
         let t = f as f32 * run.solver.dt;
         let (d, c) = scene.frame(gpu, t);
@@ -412,11 +437,18 @@ pub fn run_franka_nut_bolt(gpu: &GpuContext, run: &FrankaNutBoltRun) -> Result<F
         for (w, d) in d.iter().enumerate() {
             diverged[w] |= *d;
         }
-        let contacts = scene.sim.contacts.as_ref().unwrap();
-        contacts_sum +=
-            contacts.patches.iter().flatten().map(|p| p.contacts.len()).sum::<usize>() as f64 / worlds as f64;
-        for c in contacts.patches.iter().flatten().flat_map(|p| p.contacts.iter()) {
-            deepest = deepest.min(c.depth);
+        if !scene.sim.on_device() || f % DEVICE_STATS_EVERY == 0 {
+            let read = Instant::now();
+            let contacts = scene.sim.read_contacts(gpu);
+            contacts_sum +=
+                contacts.patches.iter().flatten().map(|p| p.contacts.len()).sum::<usize>() as f64 / worlds as f64;
+            stats_frames += 1;
+            for c in contacts.patches.iter().flatten().flat_map(|p| p.contacts.iter()) {
+                deepest = deepest.min(c.depth);
+            }
+            if scene.sim.on_device() {
+                stats_s += read.elapsed().as_secs_f64();
+            }
         }
         frames_run += 1;
         if run.trace_every > 0 && f % run.trace_every == 0 {
@@ -443,7 +475,7 @@ pub fn run_franka_nut_bolt(gpu: &GpuContext, run: &FrankaNutBoltRun) -> Result<F
             break;
         }
     }
-    let wall = start.elapsed().as_secs_f64();
+    let wall = start.elapsed().as_secs_f64() - stats_s;
     let done: Vec<f32> = scene.scripts.iter().filter_map(|s| s.done_at).collect();
     let per_frame = |x: f64| x * 1e3 / frames_run as f64;
     Ok(FrankaNutBoltReport {
@@ -455,6 +487,7 @@ pub fn run_franka_nut_bolt(gpu: &GpuContext, run: &FrankaNutBoltRun) -> Result<F
         pos_iters: run.solver.pos_iters,
         vel_iters: run.solver.vel_iters,
         dt: run.solver.dt,
+        solve: run.solve,
         success_rate: done.len() as f64 / worlds as f64,
         mean_success_s: if done.is_empty() {
             f64::NAN
@@ -466,7 +499,7 @@ pub fn run_franka_nut_bolt(gpu: &GpuContext, run: &FrankaNutBoltRun) -> Result<F
         nut_off_axis_mm: (0..worlds).map(|w| scene.nut_pose(w).0.truncate().length() * 1e3).collect(),
         pairs_per_world: scene.sim.pipe.flat.pairs.len(),
         nut_triangles: scene.nut_triangles,
-        contacts_per_world: contacts_sum / frames_run as f64,
+        contacts_per_world: contacts_sum / stats_frames.max(1) as f64,
         wall_s: wall,
         ms_per_frame: wall * 1e3 / frames_run as f64,
         handling_ms_per_frame: per_frame(handling),

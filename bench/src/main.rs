@@ -156,6 +156,10 @@ struct SceneArgs {
     /// franka-nut-bolt: chamfer the bolt's tip (ISO 4753, as Factory's bolt); false: a flat-cut tip.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     bolt_tip_chamfer: bool,
+    /// franka-nut-bolt: where the arm, fingers and parts are solved together: the device kernel
+    /// (solver::articulated; lavapipe without a GPU) or the host reference (solver::step_cpu_articulated).
+    #[arg(long, value_enum, default_value_t = factory_bench::franka::CoupledSolve::Device)]
+    solve: factory_bench::franka::CoupledSolve,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -361,6 +365,7 @@ fn main() -> Result<()> {
                     args.finger_kd.unwrap_or(base.finger_drive[1]),
                 ],
                 bolt_tip_chamfer: args.bolt_tip_chamfer,
+                solve: args.solve,
                 trace_every: args.trace_frames,
                 trace_world: args.trace_world,
                 ..base

@@ -52,6 +52,8 @@ pub(crate) const ARTICULATED_WGSL: &str = concat!(
 
 /// Most link bodies (bodies that are articulation links) per world (articulated.wgsl's MAX_SLOTS).
 pub const MAX_SLOTS: usize = 4;
+/// Most contact pairs per world (articulated.wgsl's MAX_PAIRS).
+pub const MAX_PAIRS: usize = 64;
 
 /// GPU mirror of `Coupling` in articulated.wgsl (a uniform).
 #[repr(C)]
@@ -68,26 +70,28 @@ pub struct CouplingGpu {
     /// Per slot its body index in the world and its link.
     pub slot_body: [u32; 4],
     pub slot_link: [u32; 4],
-    /// Loop passes of a frame's articulation work ([`art_loop_passes`]).
+    /// Loop passes of one dispatch's articulation work ([`art_loop_passes`]).
     pub art_passes: u32,
-    pub _pad: [u32; 3],
+    /// The substep the dispatch takes (0-based; a frame is one dispatch per substep).
+    pub substep: u32,
+    pub _pad: [u32; 2],
 }
 
-/// Loop passes articulated.wgsl's articulation work takes in one frame of `substeps` (everything but the
-/// rows: the kernel adds those from the frame's patch counts), each loop of p passes counted p + 1 as
+/// Loop passes articulated.wgsl's articulation work takes in one dispatch (one substep: everything but the
+/// rows, which the kernel adds from the frame's patch counts), each loop of p passes counted p + 1 as
 /// llvmpipe counts them; keep it in step with the shader's loops.
-pub fn art_loop_passes(model: &ArticulationModel, slot_links: &[u32], substeps: u32) -> u64 {
+pub fn art_loop_passes(model: &ArticulationModel, slot_links: &[u32]) -> u64 {
     let (nl, n, s) = (model.link_count() as u64, model.dof_count() as u64, slot_links.len() as u64);
     let (core, substitute) = substep_loop_passes(model);
     let chains: u64 = slot_links.iter().map(|&l| chain_len(model, l).0 + 1).sum();
     let build_response =
         (s + 1) + s * ((n + 1) + 7 + 6 * (2 * (n + 1) + substitute)) + chains + (s + 1) + s * (s + 1) + s * s * (n + 1);
     let twists = (s + 1) + s * (n + 1);
-    let take = twists;
-    let fk = nl + 1;
-    let place = s + 1;
-    let substep = core + build_response + fk + place + 3 * twists + 2 * take;
-    (n + 1) + fk + place + substeps as u64 * (substep + 1) + 2 * (n + 1) + (s + 1)
+    let (fk, place) = (nl + 1, s + 1);
+    // Load, the substep (forward kinematics and free velocity in `core`), the second forward kinematics,
+    // the twists three times, the impulses twice, the stores and the last substep's checks.
+    // find_active_pairs counts with the rows (the kernel's pairs term).
+    (n + 1) + place + core + build_response + fk + place + 3 * twists + 2 * twists + 2 * (n + 1) + (s + 1)
 }
 
 /// The solver and the articulation of `world_count` worlds on the GPU, over one contact pipeline.
@@ -99,8 +103,9 @@ pub struct GpuArticulatedSolver {
     /// Status per world, wrenches, rows, then the joints (see [`CouplingGpu`]).
     pub scratch: wgpu::Buffer,
     pipeline: wgpu::ComputePipeline,
-    /// Group 0 with the drives off and on (the flag is in the articulation's uniform).
-    model_groups: [wgpu::BindGroup; 2],
+    /// Group 0 per substep (its coupling uniform names the substep), with the drives off and on (the flag
+    /// is in the articulation's uniform).
+    model_groups: Vec<[wgpu::BindGroup; 2]>,
     contact_group: wgpu::BindGroup,
     state_group: wgpu::BindGroup,
     drives: bool,
@@ -165,27 +170,31 @@ impl GpuArticulatedSolver {
             });
         }
         let pair_count = contacts.flat.pairs.len() as u32;
+        if pair_count as usize > MAX_PAIRS {
+            return Err(EngineError::Config {
+                field: "pairs",
+                value: format!("{pair_count} contact pairs per world"),
+                expected: format!("at most {MAX_PAIRS} (articulated.wgsl's MAX_PAIRS)"),
+            });
+        }
         let max_rows = (pair_count * contacts.cfg.max_patches * 4).max(1);
-        let art_passes = art_loop_passes(art, &slot_links, cfg.substeps);
+        let art_passes = art_loop_passes(art, &slot_links);
         // lavapipe's loop budget (GpuSolver::new): refused here only what no frame could take.
         let loop_budget = if gpu.is_software() { crate::contact::LOOP_ITERATION_LIMIT / 8 * 7 } else { 0 };
         if loop_budget > 0 {
             let (pairs, bodies) = (pair_count as u64 + 1, model.body_count() as u64 + 1);
             let sweeps = (cfg.pos_iters + cfg.vel_iters + 1) as u64;
-            let passes = 3 * pairs
-                + cfg.substeps as u64 * (sweeps * (pairs + 2) + 4 * pairs + 2 * bodies + 1)
-                + bodies
-                + art_passes
-                + 2;
+            // The first substep's dispatch, which also builds the rows.
+            let passes = 4 * pairs + (sweeps * (pairs + 2) + 4 * pairs + 2 * bodies + 1) + bodies + art_passes + 2;
             if passes > loop_budget as u64 {
                 return Err(EngineError::Config {
                     field: "substeps x (pos_iters + vel_iters) x pairs",
                     value: format!(
-                        "{} x ({} + {}) x {pair_count} = {passes} loop passes with the articulation, before any contact",
-                        cfg.substeps, cfg.pos_iters, cfg.vel_iters
+                        "({} + {}) x {pair_count} = {passes} loop passes per substep with the articulation, before any contact",
+                        cfg.pos_iters, cfg.vel_iters
                     ),
                     expected: format!(
-                        "at most {loop_budget} on a software adapter (llvmpipe's loop limit); use fewer substeps, iterations or shape pairs per world"
+                        "at most {loop_budget} on a software adapter (llvmpipe's loop limit); use fewer iterations or shape pairs per world"
                     ),
                 });
             }
@@ -218,7 +227,8 @@ impl GpuArticulatedSolver {
             slot_body,
             slot_link,
             art_passes: art_passes.min(u32::MAX as u64) as u32,
-            _pad: [0; 3],
+            substep: 0,
+            _pad: [0; 2],
         };
         let sp = solver_params(cfg, model, world_count, pair_count, max_rows, loop_budget);
         let mut bodies: Vec<BodyGpu> = bodies_gpu(model);
@@ -254,7 +264,11 @@ impl GpuArticulatedSolver {
             [false, true].map(|on| gpu.uniform_buffer("articulated-art-params", bytemuck::bytes_of(&params(on))));
         let links_buf = gpu.uniform_buffer("articulated-links", bytemuck::cast_slice(&links));
         let dofs_buf = gpu.uniform_buffer("articulated-dofs", bytemuck::cast_slice(&dofs));
-        let coupling_buf = gpu.uniform_buffer("articulated-coupling", bytemuck::bytes_of(&coupling));
+        let coupling_bufs: Vec<wgpu::Buffer> = (0..cfg.substeps)
+            .map(|substep| {
+                gpu.uniform_buffer("articulated-coupling", bytemuck::bytes_of(&CouplingGpu { substep, ..coupling }))
+            })
+            .collect();
         let body_qd = gpu.storage_buffer_zeroed("articulated-body_qd", (world_count * contacts.body_count) as u64 * 32);
         let scratch = gpu.storage_buffer_zeroed("articulated-scratch", scratch_bytes);
         let mut constants = solver_constants(cfg).to_vec();
@@ -267,22 +281,27 @@ impl GpuArticulatedSolver {
             "step",
             &constants,
         );
-        let model_groups = [0, 1].map(|i| {
-            gpu.bind_group(
-                &pipeline,
-                0,
-                &[
-                    &sp_buf,
-                    &contacts.pairs,
-                    &contacts.sdf_values,
-                    &bodies_buf,
-                    &art_params[i],
-                    &links_buf,
-                    &dofs_buf,
-                    &coupling_buf,
-                ],
-            )
-        });
+        let model_groups = coupling_bufs
+            .iter()
+            .map(|coupling_buf| {
+                [0, 1].map(|i| {
+                    gpu.bind_group(
+                        &pipeline,
+                        0,
+                        &[
+                            &sp_buf,
+                            &contacts.pairs,
+                            &contacts.sdf_values,
+                            &bodies_buf,
+                            &art_params[i],
+                            &links_buf,
+                            &dofs_buf,
+                            coupling_buf,
+                        ],
+                    )
+                })
+            })
+            .collect();
         let contact_group = gpu.bind_group(&pipeline, 1, &[&contacts.patches, &contacts.patch_counts]);
         let state_group = gpu.bind_group(&pipeline, 2, &[&contacts.body_q, &body_qd, &scratch]);
         Ok(GpuArticulatedSolver {
@@ -409,17 +428,20 @@ impl GpuArticulatedSolver {
         Ok(())
     }
 
-    /// Records one coupled step (after the contact pipeline's dispatches of the same frame).
+    /// Records one coupled step (after the contact pipeline's dispatches of the same frame): one dispatch
+    /// per substep (within a pass, each dispatch sees the storage writes of the one before).
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("articulated-solver"),
             timestamp_writes: None,
         });
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.model_groups[self.drives as usize], &[]);
         pass.set_bind_group(1, &self.contact_group, &[]);
         pass.set_bind_group(2, &self.state_group, &[]);
-        pass.dispatch_workgroups(self.world_count.div_ceil(SOLVER_WG), 1, 1);
+        for groups in &self.model_groups {
+            pass.set_bind_group(0, &groups[self.drives as usize], &[]);
+            pass.dispatch_workgroups(self.world_count.div_ceil(SOLVER_WG), 1, 1);
+        }
     }
 
     /// Submits one whole frame: the contact pipeline's dispatches, then this step.
@@ -511,5 +533,6 @@ mod tests {
         assert_eq!(layouter[h].size as usize, std::mem::size_of::<CouplingGpu>());
         let offsets: Vec<u32> = members.iter().map(|m| m.offset).collect();
         assert_eq!(offsets, [0, 4, 8, 12, 16, 32, 48, 52, 56, 60]);
+        assert_eq!(std::mem::offset_of!(CouplingGpu, substep), 52);
     }
 }

@@ -46,11 +46,13 @@ struct Coupling {
     // Per slot: its body and its link.
     slot_body: vec4<u32>,
     slot_link: vec4<u32>,
-    // Loop passes of a frame's articulation work (articulated.rs), for the loop budget.
+    // Loop passes of one dispatch's articulation work (articulated.rs), for the loop budget.
     art_passes: u32,
+    // The substep this dispatch takes (a frame is one dispatch per substep, each with its own copy of
+    // this uniform), and the substeps per frame.
+    substep: u32,
     _pad0: u32,
     _pad1: u32,
-    _pad2: u32,
 }
 
 // Slots, a constant of the pipeline: the per-impulse response over the slots is written out for each,
@@ -121,18 +123,124 @@ fn sv_dot(a: Sv, b: Sv) -> f32 {
     return dot(a.lin, b.lin) + dot(a.ang, b.ang);
 }
 
-// K_st u.
-fn k_times(s: u32, t: u32, u: Sv) -> Sv {
-    let i = 4u * (s * MAX_SLOTS + t);
-    return Sv(kblk[i] * u.lin + kblk[i + 1u] * u.ang, kblk[i + 2u] * u.lin + kblk[i + 3u] * u.ang);
-}
-
 // What a pass over one pair's rows reads once when a side is a link body: PairCtx, the link side's slot,
 // and its sign (+1: the link is body a, which takes +d of an impulse along d; -1: it is b).
 struct LinkCtx {
     c: PairCtx,
     ls: u32,
     sign: f32,
+}
+
+// The pass's K_{s, ls} for every slot s, at 4 s (linear <- force, linear <- torque, angular <- force,
+// angular <- torque): copied out of kblk once per pass (link_ctx) and read at constant indices from then
+// on. Kept out of LinkCtx: passed by value through the row functions, a context holding these 16 matrices
+// made each pass over a pair cost several times its rows on lavapipe (2026-12-05).
+var<private> lk: array<mat3x3<f32>, 16>;
+
+fn link_ctx(c: PairCtx, ls: u32, sign: f32) -> LinkCtx {
+    load_k_column(ls);
+    return LinkCtx(c, ls, sign);
+}
+
+// lk = K_{s, ls} for every slot s, every read of kblk at a constant index (at a run-time index the
+// 64-entry array is a chain of selects).
+fn load_k_column(ls: u32) {
+    if (ls == 0u) {
+        lk[0] = kblk[0];
+        lk[1] = kblk[1];
+        lk[2] = kblk[2];
+        lk[3] = kblk[3];
+        if (SLOT_COUNT > 1u) {
+            lk[4] = kblk[16];
+            lk[5] = kblk[17];
+            lk[6] = kblk[18];
+            lk[7] = kblk[19];
+        }
+        if (SLOT_COUNT > 2u) {
+            lk[8] = kblk[32];
+            lk[9] = kblk[33];
+            lk[10] = kblk[34];
+            lk[11] = kblk[35];
+        }
+        if (SLOT_COUNT > 3u) {
+            lk[12] = kblk[48];
+            lk[13] = kblk[49];
+            lk[14] = kblk[50];
+            lk[15] = kblk[51];
+        }
+    }
+    if (SLOT_COUNT > 1u && ls == 1u) {
+        lk[0] = kblk[4];
+        lk[1] = kblk[5];
+        lk[2] = kblk[6];
+        lk[3] = kblk[7];
+        if (SLOT_COUNT > 1u) {
+            lk[4] = kblk[20];
+            lk[5] = kblk[21];
+            lk[6] = kblk[22];
+            lk[7] = kblk[23];
+        }
+        if (SLOT_COUNT > 2u) {
+            lk[8] = kblk[36];
+            lk[9] = kblk[37];
+            lk[10] = kblk[38];
+            lk[11] = kblk[39];
+        }
+        if (SLOT_COUNT > 3u) {
+            lk[12] = kblk[52];
+            lk[13] = kblk[53];
+            lk[14] = kblk[54];
+            lk[15] = kblk[55];
+        }
+    }
+    if (SLOT_COUNT > 2u && ls == 2u) {
+        lk[0] = kblk[8];
+        lk[1] = kblk[9];
+        lk[2] = kblk[10];
+        lk[3] = kblk[11];
+        if (SLOT_COUNT > 1u) {
+            lk[4] = kblk[24];
+            lk[5] = kblk[25];
+            lk[6] = kblk[26];
+            lk[7] = kblk[27];
+        }
+        if (SLOT_COUNT > 2u) {
+            lk[8] = kblk[40];
+            lk[9] = kblk[41];
+            lk[10] = kblk[42];
+            lk[11] = kblk[43];
+        }
+        if (SLOT_COUNT > 3u) {
+            lk[12] = kblk[56];
+            lk[13] = kblk[57];
+            lk[14] = kblk[58];
+            lk[15] = kblk[59];
+        }
+    }
+    if (SLOT_COUNT > 3u && ls == 3u) {
+        lk[0] = kblk[12];
+        lk[1] = kblk[13];
+        lk[2] = kblk[14];
+        lk[3] = kblk[15];
+        if (SLOT_COUNT > 1u) {
+            lk[4] = kblk[28];
+            lk[5] = kblk[29];
+            lk[6] = kblk[30];
+            lk[7] = kblk[31];
+        }
+        if (SLOT_COUNT > 2u) {
+            lk[8] = kblk[44];
+            lk[9] = kblk[45];
+            lk[10] = kblk[46];
+            lk[11] = kblk[47];
+        }
+        if (SLOT_COUNT > 3u) {
+            lk[12] = kblk[60];
+            lk[13] = kblk[61];
+            lk[14] = kblk[62];
+            lk[15] = kblk[63];
+        }
+    }
 }
 
 // Per slot, the twist change (linear [2 s], angular [2 s + 1]) of a unit impulse along the direction last
@@ -144,38 +252,63 @@ fn link_lever(l: LinkCtx, ra: vec3<f32>, rb: vec3<f32>) -> vec3<f32> {
     return select(rb, ra, l.sign > 0.0);
 }
 
+// Slot s's twist change for the spatial impulse u on the link side: K_{s, ls} u.
+fn slot_response(s: u32, u: Sv) -> Sv {
+    return Sv(lk[4u * s] * u.lin + lk[4u * s + 1u] * u.ang, lk[4u * s + 2u] * u.lin + lk[4u * s + 3u] * u.ang);
+}
+
 // Fills dir_w for direction d (not necessarily unit) and returns the link side's part of the inverse
 // effective mass along d, u . K_{ls, ls} u with u its spatial impulse (solver/mod.rs Step::eff).
 fn link_response(l: LinkCtx, ra: vec3<f32>, rb: vec3<f32>, d: vec3<f32>) -> f32 {
     let u = Sv(l.sign * d, l.sign * cross(link_lever(l, ra, rb), d));
+    var own = 0.0;
     if (SLOT_COUNT > 0u) {
-        let w = k_times(0u, l.ls, u);
+        let w = slot_response(0u, u);
         dir_w[0] = w.lin;
         dir_w[1] = w.ang;
+        own = select(own, sv_dot(u, w), l.ls == 0u);
     }
     if (SLOT_COUNT > 1u) {
-        let w = k_times(1u, l.ls, u);
+        let w = slot_response(1u, u);
         dir_w[2] = w.lin;
         dir_w[3] = w.ang;
+        own = select(own, sv_dot(u, w), l.ls == 1u);
     }
     if (SLOT_COUNT > 2u) {
-        let w = k_times(2u, l.ls, u);
+        let w = slot_response(2u, u);
         dir_w[4] = w.lin;
         dir_w[5] = w.ang;
+        own = select(own, sv_dot(u, w), l.ls == 2u);
     }
     if (SLOT_COUNT > 3u) {
-        let w = k_times(3u, l.ls, u);
+        let w = slot_response(3u, u);
         dir_w[6] = w.lin;
         dir_w[7] = w.ang;
+        own = select(own, sv_dot(u, w), l.ls == 3u);
     }
-    return sv_dot(u, Sv(dir_w[2u * l.ls], dir_w[2u * l.ls + 1u]));
+    return own;
+}
+
+// The link side's twist (read at constant indices, see LinkCtx).
+fn link_twist(l: LinkCtx) -> Sv {
+    var t = Sv(link_v[0], link_v[1]);
+    if (SLOT_COUNT > 1u && l.ls == 1u) {
+        t = Sv(link_v[2], link_v[3]);
+    }
+    if (SLOT_COUNT > 2u && l.ls == 2u) {
+        t = Sv(link_v[4], link_v[5]);
+    }
+    if (SLOT_COUNT > 3u && l.ls == 3u) {
+        t = Sv(link_v[6], link_v[7]);
+    }
+    return t;
 }
 
 // Velocity along d of the row's point on a relative to b (the link side through its twist, the rigid side
 // through the velocity the pass carries).
 fn link_rel(l: LinkCtx, vla: Vel, vlb: Vel, ra: vec3<f32>, rb: vec3<f32>, d: vec3<f32>) -> f32 {
-    let rl = link_lever(l, ra, rb);
-    let vl = link_v[2u * l.ls] + cross(link_v[2u * l.ls + 1u], rl);
+    let t = link_twist(l);
+    let vl = t.lin + cross(t.ang, link_lever(l, ra, rb));
     let va = select(vel_at(vla, ra), vl, l.sign > 0.0);
     let vb = select(vl, vel_at(vlb, rb), l.sign > 0.0);
     return dot(va - vb, d);
@@ -187,23 +320,39 @@ fn link_rel(l: LinkCtx, vla: Vel, vlb: Vel, ra: vec3<f32>, rb: vec3<f32>, d: vec
 fn link_apply(l: LinkCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, ra: vec3<f32>, rb: vec3<f32>, d: vec3<f32>, x: f32) {
     *vla = vel_apply(l.c.da, *vla, ra, d * x, 1.0);
     *vlb = vel_apply(l.c.db, *vlb, rb, d * x, -1.0);
-    link_phi[2u * l.ls] += (l.sign * x) * d;
-    link_phi[2u * l.ls + 1u] += (l.sign * x) * cross(link_lever(l, ra, rb), d);
+    let f = (l.sign * x) * d;
+    let m = (l.sign * x) * cross(link_lever(l, ra, rb), d);
     if (SLOT_COUNT > 0u) {
         link_v[0] += dir_w[0] * x;
         link_v[1] += dir_w[1] * x;
+        if (l.ls == 0u) {
+            link_phi[0] += f;
+            link_phi[1] += m;
+        }
     }
     if (SLOT_COUNT > 1u) {
         link_v[2] += dir_w[2] * x;
         link_v[3] += dir_w[3] * x;
+        if (l.ls == 1u) {
+            link_phi[2] += f;
+            link_phi[3] += m;
+        }
     }
     if (SLOT_COUNT > 2u) {
         link_v[4] += dir_w[4] * x;
         link_v[5] += dir_w[5] * x;
+        if (l.ls == 2u) {
+            link_phi[4] += f;
+            link_phi[5] += m;
+        }
     }
     if (SLOT_COUNT > 3u) {
         link_v[6] += dir_w[6] * x;
         link_v[7] += dir_w[7] * x;
+        if (l.ls == 3u) {
+            link_phi[6] += f;
+            link_phi[7] += m;
+        }
     }
 }
 
@@ -288,32 +437,30 @@ fn link_pair_pass(world: u32, p: u32, first: u32, count: u32, h: f32, bias: bool
     let pair = pairs[p];
     let c = PairCtx(pair, view(world, pair.body_a), view(world, pair.body_b), dyn_of(world, pair.body_a), dyn_of(world, pair.body_b));
     // One side is a link (articulated.rs refuses pairs of two link bodies).
-    let l = LinkCtx(c, select(sb, sa, sa != NONE), select(-1.0, 1.0, sa != NONE));
+    let l = link_ctx(c, select(sb, sa, sa != NONE), select(-1.0, 1.0, sa != NONE));
     var vla = vel_load(c.da);
     var vlb = vel_load(c.db);
-    var i = 0u;
+    // One loop over (patch, pass), not a loop of passes inside a loop of patches: lavapipe runs a loop's
+    // body at least once under a lane mask, so an inner loop ran all its passes, masked, for pairs without
+    // patches, and for every rigid pair (whose pass runs this function masked).
+    let per_patch = select(LINK_PATCH_ITERS, 1u, warm);
+    let total = count * per_patch;
+    var it = 0u;
     loop {
-        let g0 = first + i * 4u * ROW;
+        let g0 = first + (it / per_patch) * 4u * ROW;
         if (warm) {
             link_warm_row(l, &vla, &vlb, g0);
             link_warm_row(l, &vla, &vlb, g0 + ROW);
             link_warm_row(l, &vla, &vlb, g0 + 2u * ROW);
             link_warm_row(l, &vla, &vlb, g0 + 3u * ROW);
         } else {
-            var sweep_pass = 0u;
-            loop {
-                link_solve_row(l, &vla, &vlb, g0, g0, h, bias);
-                link_solve_row(l, &vla, &vlb, g0, g0 + ROW, h, bias);
-                link_solve_row(l, &vla, &vlb, g0, g0 + 2u * ROW, h, bias);
-                link_solve_row(l, &vla, &vlb, g0, g0 + 3u * ROW, h, bias);
-                sweep_pass += 1u;
-                if (sweep_pass >= LINK_PATCH_ITERS) {
-                    break;
-                }
-            }
+            link_solve_row(l, &vla, &vlb, g0, g0, h, bias);
+            link_solve_row(l, &vla, &vlb, g0, g0 + ROW, h, bias);
+            link_solve_row(l, &vla, &vlb, g0, g0 + 2u * ROW, h, bias);
+            link_solve_row(l, &vla, &vlb, g0, g0 + 3u * ROW, h, bias);
         }
-        i += 1u;
-        if (i >= count) {
+        it += 1u;
+        if (it >= total) {
             break;
         }
     }
@@ -321,7 +468,36 @@ fn link_pair_pass(world: u32, p: u32, first: u32, count: u32, h: f32, bias: bool
     vel_store(c.db, vlb);
 }
 
-// solver_sweep.wgsl's hook.
+// The world's pairs with patches this frame, in pair order (set at each dispatch's start): the sweeps
+// visit only these. On lavapipe a pass over a pair without patches still runs its rows once, masked, and
+// runs both the rigid and the link pass (a branch runs both sides), the link one several times the cost
+// of a rigid one; most pairs are empty most of the time (the pads and the table, the nut and the table once
+// it is picked).
+var<private> active_pairs: array<u32, MAX_PAIRS>;
+var<private> active_count: u32;
+
+// Pairs per world articulated.rs accepts (the bound of active_pairs).
+const MAX_PAIRS: u32 = 64u;
+
+fn find_active_pairs(world: u32) {
+    active_count = 0u;
+    for (var p = 0u; p < sp.pair_count; p++) {
+        if (patch_counts[world * sp.pair_count + p] > 0u) {
+            active_pairs[active_count] = p;
+            active_count += 1u;
+        }
+    }
+}
+
+// solver_sweep.wgsl's hooks.
+fn sweep_pair_count(world: u32) -> u32 {
+    return active_count;
+}
+
+fn sweep_pair(world: u32, j: u32) -> u32 {
+    return active_pairs[j];
+}
+
 fn pass_pair(world: u32, p: u32, first: u32, count: u32, h: f32, bias: bool, warm: bool) {
     if (count == 0u) {
         return;
@@ -415,45 +591,102 @@ fn build_response() {
     }
 }
 
-// The link bodies' twists J_s qd.
+// Slot s's twist J_s qd.
+fn slot_twist(s: u32) -> Sv {
+    var lin = vec3<f32>(0.0);
+    var ang = vec3<f32>(0.0);
+    for (var d = 0u; d < params.dof_count; d++) {
+        lin += slot_jl[s * MAX_DOFS + d] * qd[d];
+        ang += slot_ja[s * MAX_DOFS + d] * qd[d];
+    }
+    return Sv(lin, ang);
+}
+
+// The link bodies' twists J_s qd. link_v and link_phi are read and written at constant indices only (the
+// slots written out): so they stay in registers, where one access at a run-time index anywhere would put
+// every access of the rows' hot path in memory.
 fn link_twists() {
-    let n = params.dof_count;
-    for (var s = 0u; s < coupling.slot_count; s++) {
-        var lin = vec3<f32>(0.0);
-        var ang = vec3<f32>(0.0);
-        for (var d = 0u; d < n; d++) {
-            lin += slot_jl[s * MAX_DOFS + d] * qd[d];
-            ang += slot_ja[s * MAX_DOFS + d] * qd[d];
-        }
-        link_v[2u * s] = lin;
-        link_v[2u * s + 1u] = ang;
+    if (SLOT_COUNT > 0u) {
+        let t = slot_twist(0u);
+        link_v[0] = t.lin;
+        link_v[1] = t.ang;
+    }
+    if (SLOT_COUNT > 1u) {
+        let t = slot_twist(1u);
+        link_v[2] = t.lin;
+        link_v[3] = t.ang;
+    }
+    if (SLOT_COUNT > 2u) {
+        let t = slot_twist(2u);
+        link_v[4] = t.lin;
+        link_v[5] = t.ang;
+    }
+    if (SLOT_COUNT > 3u) {
+        let t = slot_twist(3u);
+        link_v[6] = t.lin;
+        link_v[7] = t.ang;
+    }
+}
+
+// qd += Y_s phi_s for spatial impulse phi_s (force, torque) on slot s.
+fn slot_take(s: u32, f: vec3<f32>, m: vec3<f32>) {
+    for (var d = 0u; d < params.dof_count; d++) {
+        qd[d] += dot(slot_yl[s * MAX_DOFS + d], f) + dot(slot_ya[s * MAX_DOFS + d], m);
     }
 }
 
 // qd += sum_t Y_t phi_t, and the tallies cleared (dynamics.rs ContactResponse::apply_impulses).
 fn joints_take_impulses() {
-    let n = params.dof_count;
-    for (var t = 0u; t < coupling.slot_count; t++) {
-        let f = link_phi[2u * t];
-        let m = link_phi[2u * t + 1u];
-        for (var d = 0u; d < n; d++) {
-            qd[d] += dot(slot_yl[t * MAX_DOFS + d], f) + dot(slot_ya[t * MAX_DOFS + d], m);
-        }
-        link_phi[2u * t] = vec3<f32>(0.0);
-        link_phi[2u * t + 1u] = vec3<f32>(0.0);
+    if (SLOT_COUNT > 0u) {
+        slot_take(0u, link_phi[0], link_phi[1]);
+        link_phi[0] = vec3<f32>(0.0);
+        link_phi[1] = vec3<f32>(0.0);
+    }
+    if (SLOT_COUNT > 1u) {
+        slot_take(1u, link_phi[2], link_phi[3]);
+        link_phi[2] = vec3<f32>(0.0);
+        link_phi[3] = vec3<f32>(0.0);
+    }
+    if (SLOT_COUNT > 2u) {
+        slot_take(2u, link_phi[4], link_phi[5]);
+        link_phi[4] = vec3<f32>(0.0);
+        link_phi[5] = vec3<f32>(0.0);
+    }
+    if (SLOT_COUNT > 3u) {
+        slot_take(3u, link_phi[6], link_phi[7]);
+        link_phi[6] = vec3<f32>(0.0);
+        link_phi[7] = vec3<f32>(0.0);
     }
 }
 
+// Slot s's twist into its body's velocity.
+fn store_slot_twist(first: u32, s: u32, lin: vec3<f32>, ang: vec3<f32>) {
+    let g = first + coupling.slot_body[s];
+    body_qd[2u * g] = vec4<f32>(lin, 0.0);
+    body_qd[2u * g + 1u] = vec4<f32>(ang, 0.0);
+}
+
+// One substep per dispatch (the host dispatches sp.substeps per frame, coupling.substep = 0, 1, ...): lavapipe
+// budgets loop passes per invocation, and a frame of 4 substeps of 32 sweeps with the articulation passed
+// it once the nut's thread was in contact (the world was then skipped, frozen). The first substep builds the
+// frame's rows; between dispatches the state waits in storage (joints in solver_scratch, bodies in body_q
+// and body_qd, impulses in the rows), and everything a substep derives (link Jacobians, K, the links'
+// twists) it derives afresh, as the host does.
 @compute @workgroup_size(64)
 fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     let world = gid.x;
     if (world >= sp.world_count) {
         return;
     }
+    let first_substep = coupling.substep == 0u;
+    let last_substep = coupling.substep + 1u >= sp.substeps;
+    if (!first_substep && solver_scratch[world].z == 1.0) {
+        return; // skipped this frame for the loop budget
+    }
     let h = sp.dt / f32(sp.substeps);
     let row0 = rows_base() + world * sp.max_rows * ROW;
-    // The loop budget (solver.wgsl): the rows' passes, link patches at LINK_PATCH_ITERS, and the
-    // articulation's (counted on the host).
+    // The loop budget (solver.wgsl) of this dispatch: its rows' passes, link patches at LINK_PATCH_ITERS,
+    // and the articulation's (counted on the host).
     var patches_used = 0u;
     var link_patches = 0u;
     for (var p = 0u; p < sp.pair_count; p++) {
@@ -468,84 +701,97 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     let per_sweep = pairs_f + f32(patches_used) * f32(sp.patch_iters + 1u) + f32(link_patches) * f32(LINK_PATCH_ITERS + 2u) + 2.0;
     let sweeps = f32(sp.pos_iters + sp.vel_iters + 1u);
     let resamples = 2.0 * (2.0 * pairs_f + f32(patches_used + link_patches));
-    let per_substep = sweeps * per_sweep + resamples + 2.0 * f32(sp.body_count + 1u) + 1.0;
-    let passes = 3.0 * pairs_f + f32(patches_used + link_patches) + f32(sp.substeps) * per_substep + f32(sp.body_count) + f32(coupling.art_passes) + 2.0;
-    let frame = bitcast<u32>(solver_scratch[world].w) + 1u;
+    let substep_passes = sweeps * per_sweep + resamples + 2.0 * f32(sp.body_count + 1u) + 1.0;
+    var passes = 2.0 * pairs_f + substep_passes + f32(sp.body_count) + f32(coupling.art_passes) + 2.0;
+    if (first_substep) {
+        passes += 2.0 * pairs_f + f32(patches_used + link_patches);
+    }
     if (sp.loop_budget > 0u && passes > f32(sp.loop_budget)) {
         solver_scratch[world] = vec4<f32>(0.0, 0.0, 1.0, solver_scratch[world].w);
         return;
     }
+    find_active_pairs(world);
     let jb = joint_block(world);
     let n = params.dof_count;
     for (var d = 0u; d < n; d++) {
         q[d] = joint_get(jb, d);
         qd[d] = joint_get(jb + coupling.joint_plane, d);
     }
-    // The frame's rows at the link poses the joints give.
     forward_kinematics();
-    place_link_bodies(world);
-    var n_rows = 0u;
-    for (var p = 0u; p < sp.pair_count; p++) {
-        let pw = world * sp.pair_count + p;
-        let count = patch_counts[pw];
-        if (count == 0u) {
-            continue;
+    if (first_substep) {
+        // The frame's rows at the link poses the joints give.
+        place_link_bodies(world);
+        let frame = bitcast<u32>(solver_scratch[world].w) + 1u;
+        var n_rows = 0u;
+        for (var p = 0u; p < sp.pair_count; p++) {
+            let pw = world * sp.pair_count + p;
+            let count = patch_counts[pw];
+            if (count == 0u) {
+                continue;
+            }
+            let pair = pairs[p];
+            let va = view(world, pair.body_a);
+            let vb = view(world, pair.body_b);
+            for (var i = 0u; i < count; i++) {
+                let g0 = row_index(row0, p, i, 0u);
+                n_rows += build_patch_rows(g0, g0, p, p, pair, va, vb, patches[pw * MAX_PATCHES + i], frame);
+            }
         }
-        let pair = pairs[p];
-        let va = view(world, pair.body_a);
-        let vb = view(world, pair.body_b);
-        for (var i = 0u; i < count; i++) {
-            let g0 = row_index(row0, p, i, 0u);
-            n_rows += build_patch_rows(g0, g0, p, p, pair, va, vb, patches[pw * MAX_PATCHES + i], frame);
-        }
+        // x: ok so far (a later substep clears it), y: rows, z: 0 (stepped), w: the frame.
+        solver_scratch[world] = vec4<f32>(1.0, f32(n_rows), 0.0, bitcast<f32>(frame));
     }
     let first = world * sp.body_count;
-    var art_ok = true;
-    var sub = 0u;
-    loop {
-        forward_kinematics();
-        if (free_velocity(jb, h)) {
-            build_response();
-        } else {
-            art_ok = false;
-        }
-        link_twists();
-        integrate_bodies(first, h, false);
-        sweep(world, row0, h, true, true);
-        sweep_runs(world, row0, h, sp.pos_iters, true);
-        integrate_bodies(first, h, true);
-        joints_take_impulses();
-        integrate_positions(h);
-        forward_kinematics();
-        place_link_bodies(world);
-        // The substep's Jacobians serve the velocity sweeps too (step_cpu_articulated alike).
-        link_twists();
-        sweep_runs(world, row0, h, sp.vel_iters, false);
-        joints_take_impulses();
-        link_twists();
-        sub += 1u;
-        if (sub >= sp.substeps) {
-            break;
-        }
+    var ok = solver_scratch[world].x;
+    // The substep (step_cpu_articulated's loop body).
+    if (free_velocity(jb, h)) {
+        build_response();
+    } else {
+        ok = 0.0;
     }
-    var ok = select(0.0, 1.0, art_ok);
+    link_twists();
+    integrate_bodies(first, h, false);
+    sweep(world, row0, h, true, true);
+    sweep_runs(world, row0, h, sp.pos_iters, true);
+    integrate_bodies(first, h, true);
+    joints_take_impulses();
+    integrate_positions(h);
+    forward_kinematics();
+    place_link_bodies(world);
+    // The substep's Jacobians serve the velocity sweeps too (step_cpu_articulated alike).
+    link_twists();
+    sweep_runs(world, row0, h, sp.vel_iters, false);
+    joints_take_impulses();
+    link_twists();
     for (var d = 0u; d < n; d++) {
         joint_set(jb, d, q[d]);
         joint_set(jb + coupling.joint_plane, d, qd[d]);
-        let bits = bitcast<u32>(q[d] + qd[d]) & 0x7f800000u;
-        if (bits == 0x7f800000u || abs(qd[d]) > sp.max_speed) {
-            ok = 0.0;
+    }
+    if (SLOT_COUNT > 0u) {
+        store_slot_twist(first, 0u, link_v[0], link_v[1]);
+    }
+    if (SLOT_COUNT > 1u) {
+        store_slot_twist(first, 1u, link_v[2], link_v[3]);
+    }
+    if (SLOT_COUNT > 2u) {
+        store_slot_twist(first, 2u, link_v[4], link_v[5]);
+    }
+    if (SLOT_COUNT > 3u) {
+        store_slot_twist(first, 3u, link_v[6], link_v[7]);
+    }
+    if (last_substep) {
+        // A world that went non-finite or faster than max_speed (joints included) is flagged for the caller
+        // to reset.
+        for (var d = 0u; d < n; d++) {
+            let bits = bitcast<u32>(q[d] + qd[d]) & 0x7f800000u;
+            if (bits == 0x7f800000u || abs(qd[d]) > sp.max_speed) {
+                ok = 0.0;
+            }
+        }
+        for (var b = 0u; b < sp.body_count; b++) {
+            if (!body_ok(first + b)) {
+                ok = 0.0;
+            }
         }
     }
-    for (var s = 0u; s < coupling.slot_count; s++) {
-        let g = first + coupling.slot_body[s];
-        body_qd[2u * g] = vec4<f32>(link_v[2u * s], 0.0);
-        body_qd[2u * g + 1u] = vec4<f32>(link_v[2u * s + 1u], 0.0);
-    }
-    for (var b = 0u; b < sp.body_count; b++) {
-        if (!body_ok(first + b)) {
-            ok = 0.0;
-        }
-    }
-    solver_scratch[world] = vec4<f32>(ok, f32(n_rows), 0.0, bitcast<f32>(frame));
+    solver_scratch[world].x = ok;
 }

@@ -23,7 +23,15 @@ fn body_awake(g: u32) -> bool {
     return true;
 }
 
-// solver_sweep.wgsl's hook: a pass over one pair's rows.
+// solver_sweep.wgsl's hooks: every pair in order, and a pass over one pair's rows.
+fn sweep_pair_count(world: u32) -> u32 {
+    return sp.pair_count;
+}
+
+fn sweep_pair(world: u32, j: u32) -> u32 {
+    return j;
+}
+
 fn pass_pair(world: u32, p: u32, first: u32, count: u32, h: f32, bias: bool, warm: bool) {
     pair_pass(world, p, first, count, h, bias, warm, false);
 }

@@ -1,7 +1,8 @@
 // The rigid-body solver's passes over a world's rows (see solver/mod.rs for the scheme), shared by the
 // one-invocation-per-world steps: solver.wgsl (rigid bodies) and articulated.wgsl (rigid bodies and an
-// articulation). Each of those declares solver_core.wgsl's bindings and `pass_pair` (one pass over one
-// pair's rows: warm start or Gauss-Seidel update).
+// articulation). Each of those declares solver_core.wgsl's bindings, `pass_pair` (one pass over one
+// pair's rows: warm start or Gauss-Seidel update), and the pairs a sweep visits in order: the j-th of
+// `sweep_pair_count(world)` is `sweep_pair(world, j)`.
 
 // Row of slot k of patch i of pair p: rows keep their patch slots (an empty slot is a row with pair NONE),
 // so a contact can look for itself among its patch's rows of last frame.
@@ -14,17 +15,19 @@ fn row_index(row0: u32, p: u32, i: u32, k: u32) -> u32 {
 // (lavapipe budgets loop passes): a Gauss-Seidel sweep (warm = false) or the warm start (warm = true), on the
 // normals and separations resample_rows stored.
 fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool) {
-    if (sp.pair_count == 0u) {
+    let n = sweep_pair_count(world);
+    if (n == 0u) {
         return;
     }
     // The loops here test for exit at the end of the pass: lavapipe runs a loop's body once more, masked,
     // after a last pass that ends with the test at the top (contact/common.wgsl on loops).
-    var p = 0u;
+    var j = 0u;
     loop {
+        let p = sweep_pair(world, j);
         let count = patch_counts[world * sp.pair_count + p];
         pass_pair(world, p, row_index(row0, p, 0u, 0u), count, h, bias, warm);
-        p += 1u;
-        if (p >= sp.pair_count) {
+        j += 1u;
+        if (j >= n) {
             break;
         }
     }
@@ -35,14 +38,16 @@ fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool) {
 // constants: lavapipe runs both sides of every branch, so a sweep that took a run-time resample flag ran
 // the sampling code, masked, in every one of its 20 iterations (and each sweep inlined it).
 fn resample_rows(world: u32, row0: u32) {
-    if (sp.pair_count == 0u) {
+    let n = sweep_pair_count(world);
+    if (n == 0u) {
         return;
     }
-    var p = 0u;
+    var j = 0u;
     loop {
+        let p = sweep_pair(world, j);
         resample_pair(world, p, row_index(row0, p, 0u, 0u), patch_counts[world * sp.pair_count + p]);
-        p += 1u;
-        if (p >= sp.pair_count) {
+        j += 1u;
+        if (j >= n) {
             break;
         }
     }
