@@ -57,10 +57,24 @@ const GRASP_HEIGHT: f32 = 0.002;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum CoupledSolve {
+    /// The device on a hardware GPU, the host on a software adapter (lavapipe), where the host was the
+    /// faster at 128 worlds in the contact phases (docs/BENCHMARKS.md).
+    Auto,
     /// The host reference, `solver::step_cpu_articulated` (rayon over worlds).
     Host,
     /// The device kernel, `solver::articulated` (lavapipe where there is no GPU).
     Device,
+}
+
+impl CoupledSolve {
+    /// Host or device for `gpu` (auto resolved).
+    pub fn resolve(self, gpu: &GpuContext) -> Self {
+        match self {
+            CoupledSolve::Auto if gpu.is_software() => CoupledSolve::Host,
+            CoupledSolve::Auto => CoupledSolve::Device,
+            other => other,
+        }
+    }
 }
 
 /// Settings of one run.
@@ -83,7 +97,7 @@ pub struct FrankaNutBoltRun {
     /// on the crest and the pads slipped on it or it jammed part-way down: 47 of 64 worlds seated against
     /// 64 of 64 with the chamfer (seed 1, 2026-12-04, docs/BENCHMARKS.md).
     pub bolt_tip_chamfer: bool,
-    /// Where the coupled solve runs (default: the device).
+    /// Where the coupled solve runs (default: auto).
     pub solve: CoupledSolve,
     /// Print world `trace_world`'s stage, fingertip and nut to stderr every this many frames (0: never).
     pub trace_every: u32,
@@ -113,7 +127,7 @@ impl Default for FrankaNutBoltRun {
             thread_mu: 0.3,
             finger_drive: [2000.0, 50.0],
             bolt_tip_chamfer: true,
-            solve: CoupledSolve::Device,
+            solve: CoupledSolve::Auto,
             trace_every: 0,
             trace_world: 0,
         }
@@ -131,7 +145,7 @@ pub struct FrankaNutBoltReport {
     pub pos_iters: u32,
     pub vel_iters: u32,
     pub dt: f32,
-    /// Where the coupled solve ran.
+    /// Where the coupled solve ran (host or device).
     pub solve: CoupledSolve,
     /// Worlds whose nut ended within one pitch of seated, of all worlds.
     pub success_rate: f64,
@@ -251,7 +265,7 @@ impl FrankaNutBolt {
             ArticulationState::replicate(&Q_START, worlds),
         )?;
         let NutBoltScene { mut sim, nb, tip, nut, .. } = scene;
-        if run.solve == CoupledSolve::Device {
+        if run.solve.resolve(gpu) == CoupledSolve::Device {
             sim.use_device_solver(gpu)?;
         }
         let nut_triangles = nb.nut.mesh.triangle_count();
@@ -487,7 +501,7 @@ pub fn run_franka_nut_bolt(gpu: &GpuContext, run: &FrankaNutBoltRun) -> Result<F
         pos_iters: run.solver.pos_iters,
         vel_iters: run.solver.vel_iters,
         dt: run.solver.dt,
-        solve: run.solve,
+        solve: run.solve.resolve(gpu),
         success_rate: done.len() as f64 / worlds as f64,
         mean_success_s: if done.is_empty() {
             f64::NAN

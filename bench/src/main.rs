@@ -157,8 +157,9 @@ struct SceneArgs {
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     bolt_tip_chamfer: bool,
     /// franka-nut-bolt: where the arm, fingers and parts are solved together: the device kernel
-    /// (solver::articulated; lavapipe without a GPU) or the host reference (solver::step_cpu_articulated).
-    #[arg(long, value_enum, default_value_t = factory_bench::franka::CoupledSolve::Device)]
+    /// (solver::articulated; lavapipe without a GPU), the host reference (solver::step_cpu_articulated), or
+    /// auto: the device on a hardware GPU, the host on a software adapter.
+    #[arg(long, value_enum, default_value_t = factory_bench::franka::CoupledSolve::Auto)]
     solve: factory_bench::franka::CoupledSolve,
     /// Print one JSON object.
     #[arg(long)]

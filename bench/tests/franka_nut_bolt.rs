@@ -2,7 +2,7 @@
 //! against gravity, and the scripted pick-place-screw seats it on its bolt. Contacts on the GPU pipeline
 //! (lavapipe on CI), the coupled arm-and-parts solve on the host.
 
-use factory_bench::franka::{run_franka_nut_bolt, FrankaNutBolt, FrankaNutBoltRun, Stage};
+use factory_bench::franka::{run_franka_nut_bolt, CoupledSolve, FrankaNutBolt, FrankaNutBoltRun, Stage};
 use factory_engine::articulation::dynamics::world_dynamics;
 use factory_engine::gpu::GpuContext;
 use glam::Vec3;
@@ -94,4 +94,30 @@ fn franka_nut_bolt_seats_the_nut_in_most_of_64_worlds() {
     assert_eq!(report.diverged_worlds, 0);
     assert!(report.stage_reached[5] == 64, "every world should reach the screw stage: {:?}", report.stage_reached);
     assert!(report.success_rate >= SEATED_MIN, "seated in {:.1}% of 64 worlds", report.success_rate * 100.0);
+}
+
+/// The same script with the coupled solve on the device (solver::articulated; lavapipe on CI), one world
+/// through the whole episode: picked, placed and seated, nothing diverged. Measured: seated at 39.0 s (the
+/// host: 39.2 s), deepest contact 0.15 mm (2026-12-05).
+#[test]
+fn the_device_solve_seats_the_nut() {
+    let gpu = GpuContext::global().unwrap();
+    let report =
+        run_franka_nut_bolt(gpu, &FrankaNutBoltRun { worlds: 1, solve: CoupledSolve::Device, ..Default::default() })
+            .unwrap();
+    eprintln!(
+        "device, 1 world: success {}, seated at {:.2} s, stages reached {:?}, deepest contact {:.3} mm, {:.1} ms per \
+         frame (handling {:.1}, solve {:.1})",
+        report.success_rate,
+        report.mean_success_s,
+        report.stage_reached,
+        report.max_penetration_mm,
+        report.ms_per_frame,
+        report.handling_ms_per_frame,
+        report.solve_ms_per_frame
+    );
+    assert_eq!(report.solve, CoupledSolve::Device);
+    assert_eq!(report.diverged_worlds, 0);
+    assert_eq!(report.success_rate, 1.0, "the nut ended {:?} mm above its seat", report.nut_height_mm);
+    assert!(report.max_penetration_mm < 1.0, "contacts penetrated {} mm", report.max_penetration_mm);
 }
