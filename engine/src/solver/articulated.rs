@@ -464,8 +464,7 @@ impl GpuArticulatedSolver {
     /// Per world, whether its last step was skipped for lavapipe's loop budget (as
     /// [`super::gpu::GpuSolver::worlds_over_loop_budget`]).
     pub fn worlds_over_loop_budget(&self, gpu: &GpuContext) -> Vec<bool> {
-        let status: Vec<[f32; 4]> = gpu.read_buffer_prefix(&self.scratch, self.world_count as u64 * 16);
-        status.iter().map(|s| s[2] == 1.0).collect()
+        super::gpu::worlds_over_loop_budget(gpu, &self.scratch, self.world_count)
     }
 
     /// The total contact impulse [N s] (normal and friction, world frame) the last substep of the last

@@ -389,13 +389,7 @@ fn link_solve_row(l: LinkCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, 
     if (k <= 0.0) {
         return;
     }
-    var goal = 0.0;
-    if (s > 0.0) {
-        goal = -s / h;
-    } else if (bias) {
-        goal = min(-s / h, sp.max_depenetration_velocity);
-    }
-    let new_n = max(lambda.x + (goal - link_rel(l, *vla, *vlb, ra, rb, n)) / k, 0.0);
+    let new_n = max(lambda.x + (normal_goal(s, h, bias) - link_rel(l, *vla, *vlb, ra, rb, n)) / k, 0.0);
     link_apply(l, vla, vlb, ra, rb, n, new_n - lambda.x);
     lambda.x = new_n;
     let mu = lambda.w;
@@ -722,21 +716,7 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
         // The frame's rows at the link poses the joints give.
         place_link_bodies(world);
         let frame = bitcast<u32>(solver_scratch[world].w) + 1u;
-        var n_rows = 0u;
-        for (var p = 0u; p < sp.pair_count; p++) {
-            let pw = world * sp.pair_count + p;
-            let count = patch_counts[pw];
-            if (count == 0u) {
-                continue;
-            }
-            let pair = pairs[p];
-            let va = view(world, pair.body_a);
-            let vb = view(world, pair.body_b);
-            for (var i = 0u; i < count; i++) {
-                let g0 = row_index(row0, p, i, 0u);
-                n_rows += build_patch_rows(g0, g0, p, p, pair, va, vb, patches[pw * MAX_PATCHES + i], frame);
-            }
-        }
+        let n_rows = build_rows(world, row0, frame);
         // x: ok so far (a later substep clears it), y: rows, z: 0 (stepped), w: the frame.
         solver_scratch[world] = vec4<f32>(1.0, f32(n_rows), 0.0, bitcast<f32>(frame));
     }

@@ -176,6 +176,13 @@ pub(crate) fn control_range(world_count: u32, body_count: u32) -> (u64, u64) {
     (world_count as u64 * 16, world_count as u64 * body_count as u64 * 32)
 }
 
+/// The status vec4s at the front of a solver scratch buffer: per world whether its last step was skipped
+/// for lavapipe's loop budget (z = 1).
+pub(crate) fn worlds_over_loop_budget(gpu: &GpuContext, scratch: &wgpu::Buffer, world_count: u32) -> Vec<bool> {
+    let status: Vec<[f32; 4]> = gpu.read_buffer_prefix(scratch, world_count as u64 * 16);
+    status.iter().map(|s| s[2] == 1.0).collect()
+}
+
 /// vec4s per contact row in a solver scratch buffer (solver_core.wgsl's ROW).
 pub(crate) const ROW_VEC4: u64 = 4;
 
@@ -389,8 +396,7 @@ impl GpuSolver {
     /// than a software adapter allows (such a world is also flagged not ok by [`read_state`](Self::read_state)
     /// and left as it was; fewer iterations, patches or pairs per world fit).
     pub fn worlds_over_loop_budget(&self, gpu: &GpuContext) -> Vec<bool> {
-        let status: Vec<[f32; 4]> = gpu.read_buffer_prefix(&self.scratch, self.world_count as u64 * 16);
-        status.iter().map(|s| s[2] == 1.0).collect()
+        worlds_over_loop_budget(gpu, &self.scratch, self.world_count)
     }
 
     /// Reads poses, velocities and per-world status back (waits for the GPU).

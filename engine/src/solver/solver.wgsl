@@ -65,21 +65,7 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
         solver_scratch[world] = vec4<f32>(0.0, 0.0, 1.0, solver_scratch[world].w);
         return;
     }
-    var n_rows = 0u;
-    for (var p = 0u; p < sp.pair_count; p++) {
-        let pw = world * sp.pair_count + p;
-        let count = patch_counts[pw];
-        if (count == 0u) {
-            continue;
-        }
-        let pair = pairs[p];
-        let va = view(world, pair.body_a);
-        let vb = view(world, pair.body_b);
-        for (var i = 0u; i < count; i++) {
-            let g0 = row_index(row0, p, i, 0u);
-            n_rows += build_patch_rows(g0, g0, p, p, pair, va, vb, patches[pw * MAX_PATCHES + i], frame);
-        }
-    }
+    let n_rows = build_rows(world, row0, frame);
     let first = world * sp.body_count;
     // Substeps (at least 1), bodies (at least 1) and sweeps loop with the exit test at the end of the pass
     // (see sweep): with tests at the top, lavapipe ran every substep's whole body once more, masked, and a

@@ -257,6 +257,18 @@ fn resample_slot(pair: Pair, va: BodyView, vb: BodyView, ri: u32) {
     }
 }
 
+// The normal velocity a row drives to at separation s [m]: speculative when separated (approach at most
+// the gap), a bounded depenetration when penetrating in the position sweeps (bias), 0 otherwise.
+fn normal_goal(s: f32, h: f32, bias: bool) -> f32 {
+    var goal = 0.0;
+    if (s > 0.0) {
+        goal = -s / h;
+    } else if (bias) {
+        goal = min(-s / h, sp.max_depenetration_velocity);
+    }
+    return goal;
+}
+
 // One Gauss-Seidel update of row ri (of the patch at g0) of pair c on the velocities vla, vlb.
 fn solve_row(c: PairCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, g0: u32, ri: u32, h: f32, bias: bool, resample: bool) {
     let anchor = solver_scratch[ri];
@@ -286,12 +298,7 @@ fn solve_row(c: PairCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, g0: u
     if (k <= 0.0) {
         return;
     }
-    var goal = 0.0;
-    if (s > 0.0) {
-        goal = -s / h;
-    } else if (bias) {
-        goal = min(-s / h, sp.max_depenetration_velocity);
-    }
+    let goal = normal_goal(s, h, bias);
     let vn = dot(vel_at(*vla, ra) - vel_at(*vlb, rb), n);
     let new_n = max(lambda.x + (goal - vn) / k, 0.0);
     let dn = new_n - lambda.x;

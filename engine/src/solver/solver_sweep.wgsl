@@ -89,3 +89,24 @@ fn integrate_bodies(first: u32, h: f32, positions: bool) {
         }
     }
 }
+
+// Builds the world's rows from the frame's reduced contacts (the query element's point in body a's frame at
+// the frame's start; build_patch_rows) and returns how many are contacts.
+fn build_rows(world: u32, row0: u32, frame: u32) -> u32 {
+    var n_rows = 0u;
+    for (var p = 0u; p < sp.pair_count; p++) {
+        let pw = world * sp.pair_count + p;
+        let count = patch_counts[pw];
+        if (count == 0u) {
+            continue;
+        }
+        let pair = pairs[p];
+        let va = view(world, pair.body_a);
+        let vb = view(world, pair.body_b);
+        for (var i = 0u; i < count; i++) {
+            let g0 = row_index(row0, p, i, 0u);
+            n_rows += build_patch_rows(g0, g0, p, p, pair, va, vb, patches[pw * MAX_PATCHES + i], frame);
+        }
+    }
+    return n_rows;
+}
