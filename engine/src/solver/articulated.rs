@@ -453,14 +453,6 @@ impl GpuArticulatedSolver {
         }
     }
 
-    /// Submits one whole frame: the contact pipeline's dispatches, then this step.
-    pub fn submit_frame(&self, gpu: &GpuContext, contacts: &ContactPipeline) {
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        contacts.encode(&mut enc);
-        self.encode(&mut enc);
-        gpu.queue.submit([enc.finish()]);
-    }
-
     /// Per world, whether its last step was skipped for lavapipe's loop budget (as
     /// [`super::gpu::GpuSolver::worlds_over_loop_budget`]).
     pub fn worlds_over_loop_budget(&self, gpu: &GpuContext) -> Vec<bool> {

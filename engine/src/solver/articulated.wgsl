@@ -382,9 +382,9 @@ fn link_solve_row(l: LinkCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, 
     let vb = l.c.vb;
     let n = ns.xyz;
     let s = ns.w;
-    let xa = va.pos + quat_rotate(va.rot, anchor.xyz) - l.c.pair.radius * n;
-    let ra = xa - (va.pos + quat_rotate(va.rot, va.com));
-    let rb = xa - (vb.pos + quat_rotate(vb.rot, vb.com));
+    let arms = row_arms(va, vb, va.pos + quat_rotate(va.rot, anchor.xyz), l.c.pair.radius, n);
+    let ra = arms.ra;
+    let rb = arms.rb;
     let k = eff_mass(l.c.da, l.c.db, ra, rb, n) + link_response(l, ra, rb, n);
     if (k <= 0.0) {
         return;
@@ -396,10 +396,7 @@ fn link_solve_row(l: LinkCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, 
     if (mu > 0.0) {
         let t1 = any_orthonormal(n);
         let t2 = cross(n, t1);
-        var limit = mu * lambda.x;
-        if (FRICTION_PER_PATCH) {
-            limit = mu * patch_normal_share(g0, ri, lambda.x);
-        }
+        let limit = friction_limit(mu, g0, ri, lambda.x);
         lambda.y = link_friction_row(l, vla, vlb, ra, rb, t1, lambda.y, limit);
         lambda.z = link_friction_row(l, vla, vlb, ra, rb, t2, lambda.z, limit);
     }
@@ -417,9 +414,9 @@ fn link_warm_row(l: LinkCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, r
     let va = l.c.va;
     let vb = l.c.vb;
     let n = nw.xyz;
-    let xa = va.pos + quat_rotate(va.rot, anchor.xyz) - l.c.pair.radius * n;
-    let ra = xa - (va.pos + quat_rotate(va.rot, va.com));
-    let rb = xa - (vb.pos + quat_rotate(vb.rot, vb.com));
+    let arms = row_arms(va, vb, va.pos + quat_rotate(va.rot, anchor.xyz), l.c.pair.radius, n);
+    let ra = arms.ra;
+    let rb = arms.rb;
     let t1 = any_orthonormal(n);
     let imp = lambda.x * n + lambda.y * t1 + lambda.z * cross(n, t1);
     _ = link_response(l, ra, rb, imp);

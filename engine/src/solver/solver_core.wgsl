@@ -257,6 +257,27 @@ fn resample_slot(pair: Pair, va: BodyView, vb: BodyView, ri: u32) {
     }
 }
 
+// Lever arms [m] from the centres of mass of a and b (posed by va, vb) to a row's contact point on a's
+// surface: the query element's point x (world) less the pair's radius along the normal n.
+struct Arms {
+    ra: vec3<f32>,
+    rb: vec3<f32>,
+}
+
+fn row_arms(va: BodyView, vb: BodyView, x: vec3<f32>, radius: f32, n: vec3<f32>) -> Arms {
+    let xa = x - radius * n;
+    return Arms(xa - (va.pos + quat_rotate(va.rot, va.com)), xa - (vb.pos + quat_rotate(vb.rot, vb.com)));
+}
+
+// Coulomb's bound on a row's accumulated tangential impulses for normal impulse lambda_n: mu times its own
+// normal impulse, or with friction per patch its share of the patch's (patch_normal_share).
+fn friction_limit(mu: f32, g0: u32, ri: u32, lambda_n: f32) -> f32 {
+    if (FRICTION_PER_PATCH) {
+        return mu * patch_normal_share(g0, ri, lambda_n);
+    }
+    return mu * lambda_n;
+}
+
 // The normal velocity a row drives to at separation s [m]: speculative when separated (approach at most
 // the gap), a bounded depenetration when penetrating in the position sweeps (bias), 0 otherwise.
 fn normal_goal(s: f32, h: f32, bias: bool) -> f32 {
@@ -291,9 +312,9 @@ fn solve_row(c: PairCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, g0: u
     }
     let n = ns.xyz;
     let s = ns.w;
-    let xa = x - pair.radius * n;
-    let ra = xa - (va.pos + quat_rotate(va.rot, va.com));
-    let rb = xa - (vb.pos + quat_rotate(vb.rot, vb.com));
+    let arms = row_arms(va, vb, x, pair.radius, n);
+    let ra = arms.ra;
+    let rb = arms.rb;
     let k = eff_mass(c.da, c.db, ra, rb, n);
     if (k <= 0.0) {
         return;
@@ -309,10 +330,7 @@ fn solve_row(c: PairCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, g0: u
     if (mu > 0.0) {
         let t1 = any_orthonormal(n);
         let t2 = cross(n, t1);
-        var limit = mu * lambda.x;
-        if (FRICTION_PER_PATCH) {
-            limit = mu * patch_normal_share(g0, ri, lambda.x);
-        }
+        let limit = friction_limit(mu, g0, ri, lambda.x);
         // Written out (not a loop): lavapipe counts every loop pass against one budget per invocation.
         lambda.y = friction_row(c.da, c.db, vla, vlb, ra, rb, t1, eff_mass(c.da, c.db, ra, rb, t1), lambda.y, limit);
         lambda.z = friction_row(c.da, c.db, vla, vlb, ra, rb, t2, eff_mass(c.da, c.db, ra, rb, t2), lambda.z, limit);
@@ -349,9 +367,9 @@ fn warm_row(c: PairCtx, vla: ptr<function, Vel>, vlb: ptr<function, Vel>, ri: u3
     let va = c.va;
     let vb = c.vb;
     let n = nw.xyz;
-    let xa = va.pos + quat_rotate(va.rot, anchor.xyz) - c.pair.radius * n;
-    let ra = xa - (va.pos + quat_rotate(va.rot, va.com));
-    let rb = xa - (vb.pos + quat_rotate(vb.rot, vb.com));
+    let arms = row_arms(va, vb, va.pos + quat_rotate(va.rot, anchor.xyz), c.pair.radius, n);
+    let ra = arms.ra;
+    let rb = arms.rb;
     let t1 = any_orthonormal(n);
     let t2 = cross(n, t1);
     let imp = lambda.x * n + lambda.y * t1 + lambda.z * t2;
