@@ -1,17 +1,21 @@
 //! The broad phase (`pair_far`, common.wgsl; `generate::pair_far_cpu`): a pair whose bounding spheres are
-//! farther apart than the contact offset is skipped. It must be conservative: no query triangle of a skipped
+//! farther apart than the contact offset is skipped, and so is a pair whose query shape's sphere lies
+//! farther than the offset above a plane. It must be conservative: no query triangle of a skipped
 //! pair may have a candidate within the offset (checked against a brute-force search of every triangle), and
 //! it must skip (else it buys nothing). The GPU pipeline gives a skipped pair no patches, as the CPU twin does.
 
 use factory_engine::contact::generate::{pair_far_cpu, shape_world, triangle_candidate_cpu, Xf};
 use factory_engine::contact::model::FlatModel;
 use factory_engine::contact::roles::{pair_spec, ShapeDesc, ShapeGeometry};
-use factory_engine::contact::{ContactConfig, ContactModel, ContactPipeline, TransformGpu};
+use factory_engine::contact::{
+    ContactConfig, ContactModel, ContactPipeline, PairSpec, QueryShape, SdfShape, TransformGpu,
+};
 use factory_engine::gpu::GpuContext;
 use factory_engine::mesh::box_mesh;
 use factory_engine::rng::SplitMix64;
 use factory_engine::sdf::cache::SdfCache;
 use factory_engine::sdf::revolved::RevolvedSdf;
+use factory_engine::sdf::thread::{HexPrism, ThreadSdf};
 use glam::{Quat, Vec3, Vec4};
 use std::sync::Arc;
 
@@ -25,8 +29,12 @@ fn rotation(rng: &mut SplitMix64) -> Quat {
     Quat::from_axis_angle(unit_vector(rng), std::f32::consts::TAU * rng.unit())
 }
 
-/// Two bodies: a box mesh (queried) against (a) a baked grid of a tagged box and (b) an exact ring (a
-/// 16-gon torus, revolved ring profile).
+/// Pairs in the order `model` lists them.
+const PAIRS: [&str; 4] = ["grid", "ring", "thread", "plane"];
+
+/// Two bodies: a box mesh (queried) against (a) a baked grid of a tagged box, (b) an exact ring (a 16-gon
+/// torus, revolved ring profile), (c) an exact M16 x 2 bolt with its head and a chamfered tip and (d) a
+/// plane.
 fn model(cache: &SdfCache) -> ContactModel {
     let cube = Arc::new(box_mesh(Vec3::new(0.01, 0.006, 0.004)));
     let query = ShapeDesc::new(0, ShapeGeometry::Mesh { mesh: cube.clone(), sdf_resolution: None });
@@ -40,7 +48,30 @@ fn model(cache: &SdfCache) -> ContactModel {
     let grid_pair = pair_spec(&query, &tagged_box, OFFSET, cache).unwrap();
     // The ring is the SDF (an exact field takes the SDF role); the cube's triangles are queried.
     let ring_pair = pair_spec(&query, &ring_shape, OFFSET, cache).unwrap();
-    ContactModel { body_count: 2, pairs: vec![grid_pair, ring_pair] }
+    // ISO 68-1 basic M16 x 2 (as sdf::thread's tests), a 16 mm head, the tip chamfered to the root.
+    let bolt = ThreadSdf {
+        pitch: 0.002,
+        phase: 0.016,
+        pitch_radius: 0.5 * (0.016 - 0.649519 * 0.002),
+        min_radius: 0.5 * (0.016 - 1.226869 * 0.002),
+        max_radius: 0.008,
+        z_lo: 0.016,
+        z_hi: 0.041,
+        head: Some(HexPrism { apothem: 0.012, z0: 0.0, z1: 0.016 }),
+        tip_radius: 0.5 * (0.016 - 1.226869 * 0.002),
+    };
+    let thread_pair = PairSpec {
+        body_a: 0,
+        a_pose: (Vec3::ZERO, Quat::IDENTITY),
+        query: Arc::new(QueryShape::mesh(&cube)),
+        body_b: 1,
+        b_pose: (Vec3::ZERO, Quat::IDENTITY),
+        sdf: SdfShape::Thread(bolt),
+        contact_offset: OFFSET,
+        friction: 0.3,
+    };
+    let plane_pair = pair_spec(&query, &ShapeDesc::new(1, ShapeGeometry::Plane), OFFSET, cache).unwrap();
+    ContactModel { body_count: 2, pairs: vec![grid_pair, ring_pair, thread_pair, plane_pair] }
 }
 
 /// The closest candidate of any query triangle of pair `p` [m] (brute force, every triangle).
@@ -69,7 +100,7 @@ fn skipped_pairs_have_no_candidate_within_the_offset_and_far_pairs_are_skipped()
     let cache = SdfCache::new(&dir);
     let flat = model(&cache).flatten(256).unwrap();
     let mut rng = SplitMix64(7);
-    let (mut skipped, mut near_without_contact, mut with_contact) = ([0; 2], [0; 2], [0; 2]);
+    let (mut skipped, mut near_without_contact, mut with_contact) = ([0; 4], [0; 4], [0; 4]);
     for _ in 0..400 {
         // Body 1 at the origin, body 0 at 0..60 mm in a random direction, both randomly turned.
         let body_q = [
@@ -77,14 +108,14 @@ fn skipped_pairs_have_no_candidate_within_the_offset_and_far_pairs_are_skipped()
             TransformGpu::new(Vec3::ZERO, rotation(&mut rng)),
         ];
         let xf: Vec<Xf> = body_q.iter().map(|t| t.xf()).collect();
-        for p in 0..2 {
+        for p in 0..PAIRS.len() {
             let pair = &flat.pairs[p];
             let wa = shape_world(&xf, 2, 0, pair.body_a, pair.a_pos, pair.a_rot);
             let wb = shape_world(&xf, 2, 0, pair.body_b, pair.b_pos, pair.b_rot);
             let d = closest(&flat, p, &xf);
             if pair_far_cpu(pair, &wa, &wb) {
                 skipped[p] += 1;
-                assert!(d >= OFFSET, "pair {p}: skipped, but a triangle has a candidate at {d} m");
+                assert!(d >= OFFSET, "{} pair: skipped, but a triangle has a candidate at {d} m", PAIRS[p]);
             } else if d < OFFSET {
                 with_contact[p] += 1;
             } else {
@@ -92,9 +123,9 @@ fn skipped_pairs_have_no_candidate_within_the_offset_and_far_pairs_are_skipped()
             }
         }
     }
-    eprintln!("per pair (grid, ring): skipped {skipped:?}, kept without contact {near_without_contact:?}, with contact {with_contact:?}");
-    for p in 0..2 {
-        assert!(skipped[p] > 100 && with_contact[p] > 20, "pair {p}: the sample does not exercise both sides");
+    eprintln!("per pair {PAIRS:?}: skipped {skipped:?}, kept without contact {near_without_contact:?}, with contact {with_contact:?}");
+    for p in 0..PAIRS.len() {
+        assert!(skipped[p] > 50 && with_contact[p] > 20, "{} pair: the sample does not exercise both sides", PAIRS[p]);
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -109,7 +140,8 @@ fn the_gpu_pipeline_skips_far_pairs_like_its_cpu_twin() {
     let pipe = ContactPipeline::new(g, &model, worlds, &ContactConfig::default()).unwrap();
     // World 0 touching, world 1 far apart, world 2 touching again: skipped jobs must not leave last frame's
     // patches behind.
-    let at = |x: f32| TransformGpu::new(Vec3::new(x, 0.0, 0.006), Quat::IDENTITY);
+    // Far is as far above the plane as it is aside.
+    let at = |x: f32| TransformGpu::new(Vec3::new(x, 0.0, 0.006 + x), Quat::IDENTITY);
     let rest = TransformGpu::new(Vec3::ZERO, Quat::IDENTITY);
     for frame in 0..2 {
         let far = if frame == 0 { [0.0, 0.5, 0.0] } else { [0.5, 0.0, 0.5] };
@@ -118,8 +150,8 @@ fn the_gpu_pipeline_skips_far_pairs_like_its_cpu_twin() {
         pipe.run(g);
         let (gpu, cpu) = (pipe.read(g), pipe.contacts_cpu(&body_q));
         for w in 0..worlds as usize {
-            for p in 0..2 {
-                let i = w * 2 + p;
+            for p in 0..PAIRS.len() {
+                let i = w * PAIRS.len() + p;
                 let n = gpu.patches[i].len();
                 assert_eq!(n, cpu.patches[i].len(), "frame {frame} world {w} pair {p}: patch counts differ");
                 assert_eq!(gpu.candidates[i], cpu.candidates[i], "frame {frame} world {w} pair {p}");

@@ -126,9 +126,14 @@ fn xf_point(a: Transform, v: vec3<f32>) -> vec3<f32> {
     return a.p.xyz + quat_rotate(a.q, v);
 }
 
-// Broad phase: whether the pair's bounding spheres (shapes posed at world_a, world_b) are farther apart than
-// the contact offset, so that no query triangle can come within it (twin: generate.rs pair_far_cpu).
+// Broad phase: whether no query triangle can come within the contact offset: the query shape's bounding
+// sphere lies farther than the offset above a plane, or the pair's bounding spheres (shapes posed at world_a,
+// world_b) are farther apart than it (twin: generate.rs pair_far_cpu).
 fn pair_far(pair: Pair, world_a: Transform, world_b: Transform) -> bool {
+    if (pair.sdf_kind == 1u) {
+        let c = xf_point(xf_inv(world_b), xf_point(world_a, pair.a_bound.xyz));
+        return c.z - pair.a_bound.w > pair.contact_offset;
+    }
     if (pair.b_bound.w < 0.0) {
         return false;
     }

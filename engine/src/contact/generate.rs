@@ -360,9 +360,14 @@ pub fn shape_world(body_q: &[Xf], body_count: u32, world: u32, body: u32, pos: [
     body_pose.mul(&Xf::from_arrays(pos, rot))
 }
 
-/// The broad phase (common.wgsl's `pair_far`): whether the pair's bounding spheres, the shapes posed at
-/// `world_a` and `world_b`, are farther apart than the contact offset (then no triangle can have a candidate).
+/// The broad phase (common.wgsl's `pair_far`): whether no query triangle can have a candidate: the query
+/// shape's bounding sphere lies farther than the contact offset above a plane, or the pair's bounding
+/// spheres, the shapes posed at `world_a` and `world_b`, are farther apart than the offset.
 pub fn pair_far_cpu(pair: &PairGpu, world_a: &Xf, world_b: &Xf) -> bool {
+    if pair.sdf_kind == 1 {
+        let c = world_b.inv().point(world_a.point(Vec3::from_slice(&pair.a_bound[..3])));
+        return c.z - pair.a_bound[3] > pair.contact_offset;
+    }
     if pair.b_bound[3] < 0.0 {
         return false;
     }

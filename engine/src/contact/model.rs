@@ -143,6 +143,14 @@ pub struct PairGpu {
 /// w of an unbounded [`PairGpu::b_bound`].
 pub const UNBOUNDED: f32 = -1.0;
 
+/// The thread's field is the largest of up to three exact fields (the thread's flanks, a z half-space, the
+/// tip's cone; the head's is a union, exact outside), which near an edge or corner of the solid reads as
+/// little as 1/sqrt(3) of the true distance (three orthogonal faces; 0.92 at the 45-degree tip edge). So a
+/// query point can read within the contact offset c while lying up to sqrt(3) c away: the broad phase culls
+/// a thread pair only beyond sqrt(3) c, by growing the thread's sphere by (sqrt(3) - 1) c, and so never
+/// drops a candidate the generation would have kept.
+pub const THREAD_BOUND_SLACK: f32 = 0.732_050_8;
+
 /// Bounding sphere (centre xyz, radius w) of points: the centre of their box and the farthest point.
 fn bounding_sphere(points: impl Iterator<Item = Vec3> + Clone, pad: f32) -> [f32; 4] {
     let (lo, hi) = points.clone().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
@@ -157,14 +165,17 @@ fn bounding_sphere(points: impl Iterator<Item = Vec3> + Clone, pad: f32) -> [f32
 
 impl SdfShape {
     /// Bounding sphere of the shape's surface in its frame (centre xyz, radius w [m]); w = [`UNBOUNDED`]
-    /// for the plane and the thread. A grid's covers its samples within one spacing h of the surface,
+    /// for the plane (the broad phase tests a plane's half-space instead). The thread's is its solid's
+    /// ([`ThreadSdf::bound`](crate::sdf::thread::ThreadSdf::bound)), which the flat model grows by
+    /// [`THREAD_BOUND_SLACK`] times the contact offset. A grid's covers its samples within one spacing h of the surface,
     /// grown by h: every surface point lies within h sqrt(3)/2 of such a sample, and farther out the
     /// field (within its interpolation slack inside the box, the box value plus the distance to the box
     /// outside it) exceeds the distance to this sphere. The grid's whole box, which it replaced, was 47%
     /// wider for a pile's M16 nut (22.5 against 15.3 mm) and listed twice as many near pairs in a pile.
     pub fn bound(&self) -> [f32; 4] {
         match self {
-            SdfShape::Plane | SdfShape::Thread(_) => [0.0, 0.0, 0.0, UNBOUNDED],
+            SdfShape::Plane => [0.0, 0.0, 0.0, UNBOUNDED],
+            SdfShape::Thread(t) => t.bound(),
             SdfShape::Grid(g) => {
                 let h = g.spacing;
                 let near = (0..g.dims.z).flat_map(move |k| {
@@ -464,6 +475,10 @@ impl ContactModel {
                                 b
                             }
                         }
+                    }
+                    SdfShape::Thread(t) => {
+                        let [x, y, z, r] = t.bound();
+                        [x, y, z, r + THREAD_BOUND_SLACK * p.contact_offset]
                     }
                     other => other.bound(),
                 },

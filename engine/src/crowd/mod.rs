@@ -318,17 +318,6 @@ pub fn priority(a: u32, b: u32) -> u32 {
     pcg(a ^ pcg(b))
 }
 
-/// Whether the pair's shapes, posed at `world_a` and `world_b`, cannot touch (near.wgsl's `crowd_far`): the
-/// bounding spheres are farther apart than the contact offset, or, for a plane, the query shape's sphere
-/// lies farther than the offset above it.
-pub fn crowd_far_cpu(pair: &PairGpu, world_a: &Xf, world_b: &Xf) -> bool {
-    if pair.sdf_kind == 1 {
-        let c = world_b.inv().point(world_a.point(Vec3::from_slice(&pair.a_bound[..3])));
-        return c.z - pair.a_bound[3] > pair.contact_offset;
-    }
-    pair_far_cpu(pair, world_a, world_b)
-}
-
 /// The templates and tables the kernels read, and the CPU twin's copy of them.
 #[derive(Clone, Debug)]
 pub struct CrowdFlat {
@@ -464,7 +453,7 @@ impl CrowdFlat {
         let n = self.model.body_count;
         let wa = shape_world(body_q, n, world, a, p.a_pos, p.a_rot);
         let wb = shape_world(body_q, n, world, b, p.b_pos, p.b_rot);
-        !crowd_far_cpu(p, &wa, &wb)
+        !pair_far_cpu(p, &wa, &wb)
     }
 
     /// The near pair's record: its template with its bodies filled in (near.wgsl's `near_emit`).

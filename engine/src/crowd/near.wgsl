@@ -41,20 +41,11 @@ fn body_pose(w: u32, b: u32) -> Transform {
     return body_q[w * cp.body_count + b];
 }
 
-// The broad phase of a crowd pair (mod.rs crowd_far_cpu): bounding spheres, or sphere against a plane.
-fn crowd_far(pair: Pair, world_a: Transform, world_b: Transform) -> bool {
-    if (pair.sdf_kind == 1u) {
-        let c = xf_point(xf_inv(world_b), xf_point(world_a, pair.a_bound.xyz));
-        return c.z - pair.a_bound.w > pair.contact_offset;
-    }
-    return pair_far(pair, world_a, world_b);
-}
-
 fn near(t: u32, a: u32, b: u32, w: u32) -> bool {
     let p = templates[t];
     let wa = xf_mul(body_pose(w, a), Transform(p.a_pos, p.a_rot));
     let wb = xf_mul(body_pose(w, b), Transform(p.b_pos, p.b_rot));
-    return !crowd_far(p, wa, wb);
+    return !pair_far(p, wa, wb);
 }
 
 fn load(i: u32) -> u32 {

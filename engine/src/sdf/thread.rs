@@ -162,6 +162,21 @@ impl ThreadSdf {
         (d, g)
     }
 
+    /// Bounding sphere of the solid (thread, chamfered tip and head) in its frame: centre xyz on the axis,
+    /// radius w [m]. Beyond it the field may still read less than the distance to the solid (see
+    /// `contact::model::THREAD_BOUND_SLACK`).
+    pub fn bound(&self) -> [f32; 4] {
+        let (mut z0, mut z1, mut rho) = (self.z_lo, self.z_hi, self.max_radius);
+        if let Some(h) = self.head {
+            z0 = z0.min(h.z0);
+            z1 = z1.max(h.z1);
+            // The hexagon's corners lie 2 / sqrt(3) apothems from the axis.
+            rho = rho.max(h.apothem * 2.0 / SQRT3);
+        }
+        // One part in 1e5 of slack for the rounding of the world-frame test (as bounding_sphere).
+        [0.0, 0.0, 0.5 * (z0 + z1), rho.hypot(0.5 * (z1 - z0)) * (1.0 + 1e-5)]
+    }
+
     /// GPU parameter words (f32 bit patterns): pitch, phase, pitch radius, root radius, crest radius,
     /// z_lo, z_hi, has_head (0/1), head apothem, head z0, head z1, tip radius.
     pub fn to_words(&self) -> [u32; THREAD_WORDS] {
@@ -255,6 +270,41 @@ mod tests {
             z_hi: 0.041,
             head: Some(HexPrism { apothem: 0.012, z0: 0.0, z1: 0.016 }),
             tip_radius: 0.0,
+        }
+    }
+
+    /// The broad phase's promise (contact::model::THREAD_BOUND_SLACK): the solid lies inside the bound,
+    /// and every point the broad phase culls for a query at contact offset c (farther from the bound's
+    /// centre than its radius plus (1 + slack) c) reads more than c, with and without the tip's chamfer.
+    #[test]
+    fn the_bound_holds_the_solid_and_culls_only_beyond_the_offset() {
+        let mut rng = crate::rng::SplitMix64(7);
+        for t in [m16(), ThreadSdf { tip_radius: m16().min_radius, ..m16() }] {
+            let [cx, cy, cz, r] = t.bound();
+            let centre = Vec3::new(cx, cy, cz);
+            // Points of the solid (field <= 0) drawn from the box around the head and the shank.
+            let mut inside = 0;
+            for _ in 0..200_000 {
+                let p = Vec3::new((rng.unit() - 0.5) * 0.03, (rng.unit() - 0.5) * 0.03, -0.002 + rng.unit() * 0.046);
+                if t.sample(p).0 <= 0.0 {
+                    inside += 1;
+                    assert!(p.distance(centre) <= r, "{p} of the solid lies outside the bound {:?}", t.bound());
+                }
+            }
+            assert!(inside > 10_000, "only {inside} samples fell in the solid");
+            for c in [0.0005f32, 0.002, 0.005] {
+                let reach = r + (1.0 + crate::contact::model::THREAD_BOUND_SLACK) * c;
+                let mut least = f32::INFINITY;
+                for _ in 0..20_000 {
+                    let d = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5);
+                    if d.length() < 1e-3 {
+                        continue;
+                    }
+                    let p = centre + d.normalize() * reach * (1.0 + 1e-6);
+                    least = least.min(t.sample(p).0);
+                }
+                assert!(least > c, "a culled point reads {least} m, within the offset {c} m");
+            }
         }
     }
 
