@@ -171,6 +171,10 @@ pub struct FrankaNutBoltReport {
     pub handling_ms_per_frame: f64,
     pub solve_ms_per_frame: f64,
     pub controller_ms_per_frame: f64,
+    /// The same times per stage of the script: each frame counts towards the stage most worlds were in
+    /// at its start (their nut on the table, carried, or on the thread), in script order; stages no frame
+    /// counted towards are left out.
+    pub phases: Vec<PhaseTimes>,
     /// Simulated seconds per wall second, all worlds together.
     pub world_seconds_per_wall_second: f64,
     /// Deepest contact seen at any frame start [mm] (positive: penetration).
@@ -179,8 +183,19 @@ pub struct FrankaNutBoltReport {
     pub adapter: String,
 }
 
+/// A stage's share of the frames and their times [ms per frame] (see [`FrankaNutBoltReport::phases`]).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct PhaseTimes {
+    pub stage: Stage,
+    pub frames: u32,
+    pub ms_per_frame: f64,
+    pub handling_ms_per_frame: f64,
+    pub solve_ms_per_frame: f64,
+}
+
 /// Stages of the script.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Stage {
     AboveNut,
     Down,
@@ -442,12 +457,24 @@ pub fn run_franka_nut_bolt(gpu: &GpuContext, run: &FrankaNutBoltRun) -> Result<F
     let start = Instant::now();
     let mut frames_run = 0;
     let (mut stats_frames, mut stats_s) = (0u32, 0.0f64);
+    // Per stage: frames, wall [s] (less the statistics' readbacks), handling and solve [s].
+    let mut phase = [(0u32, 0.0f64, 0.0f64, 0.0f64); STAGES.len()];
     for f in 0..frames {
         let t = f as f32 * run.solver.dt;
+        let mut in_stage = [0usize; STAGES.len()];
+        for s in &scene.scripts {
+            in_stage[s.stage as usize] += 1;
+        }
+        // The first of the most populated stages.
+        let modal = (0..STAGES.len()).rev().max_by_key(|&i| in_stage[i]).unwrap_or(0);
+        let frame_start = Instant::now();
         let (d, c) = scene.frame(gpu, t);
+        let frame_s = frame_start.elapsed().as_secs_f64();
         controller += c;
         handling += scene.sim.last_handling_s;
         solve += scene.sim.last_solve_s;
+        let ph = &mut phase[modal];
+        *ph = (ph.0 + 1, ph.1 + frame_s, ph.2 + scene.sim.last_handling_s, ph.3 + scene.sim.last_solve_s);
         for (w, d) in d.iter().enumerate() {
             diverged[w] |= *d;
         }
@@ -519,6 +546,18 @@ pub fn run_franka_nut_bolt(gpu: &GpuContext, run: &FrankaNutBoltRun) -> Result<F
         handling_ms_per_frame: per_frame(handling),
         solve_ms_per_frame: per_frame(solve),
         controller_ms_per_frame: per_frame(controller),
+        phases: STAGES
+            .iter()
+            .zip(phase)
+            .filter(|(_, p)| p.0 > 0)
+            .map(|(&stage, (n, wall, handling, solve))| PhaseTimes {
+                stage,
+                frames: n,
+                ms_per_frame: wall * 1e3 / n as f64,
+                handling_ms_per_frame: handling * 1e3 / n as f64,
+                solve_ms_per_frame: solve * 1e3 / n as f64,
+            })
+            .collect(),
         world_seconds_per_wall_second: frames_run as f64 * run.solver.dt as f64 * worlds as f64 / wall,
         max_penetration_mm: if deepest.is_finite() { (-deepest as f64 * 1e3).max(0.0) } else { 0.0 },
         diverged_worlds: diverged.iter().filter(|d| **d).count() as u32,
