@@ -53,29 +53,7 @@ pub const TARGET_YAW_RATE: f32 = 2.0;
 /// Pads' bottom (the fingertip frame) above the nut's bottom while holding it [m].
 const GRASP_HEIGHT: f32 = 0.002;
 
-/// Where the arm, fingers and parts are solved together.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum CoupledSolve {
-    /// The device on a hardware GPU, the host on a software adapter (lavapipe), where the host was the
-    /// faster at 128 worlds in the contact phases (docs/BENCHMARKS.md).
-    Auto,
-    /// The host reference, `solver::step_cpu_articulated` (rayon over worlds).
-    Host,
-    /// The device kernel, `solver::articulated` (lavapipe where there is no GPU).
-    Device,
-}
-
-impl CoupledSolve {
-    /// Host or device for `gpu` (auto resolved).
-    pub fn resolve(self, gpu: &GpuContext) -> Self {
-        match self {
-            CoupledSolve::Auto if gpu.is_software() => CoupledSolve::Host,
-            CoupledSolve::Auto => CoupledSolve::Device,
-            other => other,
-        }
-    }
-}
+pub use factory_engine::articulation::sim::CoupledSolve;
 
 /// Settings of one run.
 #[derive(Clone, Debug)]
@@ -280,9 +258,7 @@ impl FrankaNutBolt {
             ArticulationState::replicate(&Q_START, worlds),
         )?;
         let NutBoltScene { mut sim, nb, tip, nut, .. } = scene;
-        if run.solve.resolve(gpu) == CoupledSolve::Device {
-            sim.use_device_solver(gpu)?;
-        }
+        sim.solve_on(gpu, run.solve)?;
         let nut_triangles = nb.nut.mesh.triangle_count();
         let arm = ArmBatch::from_articulation(&sim.articulation, &sim.joints, &tip, 7, &[]);
         let down = Quat::from_rotation_z(-finger_yaw(arm.ee_quat[0])) * arm.ee_quat[0];

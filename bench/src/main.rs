@@ -159,11 +159,17 @@ struct SceneArgs {
     /// franka-nut-bolt: where the arm, fingers and parts are solved together: the device kernel
     /// (solver::articulated; lavapipe without a GPU), the host reference (solver::step_cpu_articulated), or
     /// auto: the device on a hardware GPU, the host on a software adapter.
-    #[arg(long, value_enum, default_value_t = factory_bench::franka::CoupledSolve::Auto)]
+    #[arg(long, default_value = "auto", value_parser = parse_solve)]
     solve: factory_bench::franka::CoupledSolve,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
+}
+
+/// `--solve auto|host|device`: the engine's enum by its config names.
+fn parse_solve(s: &str) -> std::result::Result<factory_bench::franka::CoupledSolve, String> {
+    serde_json::from_value(serde_json::Value::String(s.into()))
+        .map_err(|_| format!("'{s}' is not one of auto, host, device"))
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

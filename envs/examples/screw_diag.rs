@@ -43,7 +43,12 @@ fn main() {
     if std::env::var("FK_START").is_ok() {
         let s = e.scene_mut();
         let pose = s.nut_pose(0);
-        s.reset_world(0, pose, &factory_envs::franka::scene::Q_START);
+        s.reset_world(
+            factory_engine::gpu::GpuContext::global().unwrap(),
+            0,
+            pose,
+            &factory_envs::franka::scene::Q_START,
+        );
         s.sim.sync_links();
         let arm = s.arm();
         println!("fingertip at Q_START: {:?} quat {:?}", arm.ee_pos[0], arm.ee_quat[0]);

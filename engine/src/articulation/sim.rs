@@ -19,6 +19,31 @@ use crate::solver::articulated::GpuArticulatedSolver;
 use crate::solver::{step_cpu_articulated, ArticulationStep, BodyState, Control, SolverConfig, WarmStart};
 use glam::{Quat, Vec3};
 
+/// Where the arm, fingers and parts are solved together.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CoupledSolve {
+    /// The device on a hardware GPU, the host on a software adapter (lavapipe), where the host was the
+    /// faster at 128 worlds in the contact phases (docs/BENCHMARKS.md).
+    #[default]
+    Auto,
+    /// The host reference, [`step_cpu_articulated`] (rayon over worlds).
+    Host,
+    /// The device kernel, [`GpuArticulatedSolver`] (lavapipe where there is no GPU).
+    Device,
+}
+
+impl CoupledSolve {
+    /// Host or device for `gpu` (auto resolved).
+    pub fn resolve(self, gpu: &GpuContext) -> Self {
+        match self {
+            CoupledSolve::Auto if gpu.is_software() => CoupledSolve::Host,
+            CoupledSolve::Auto => CoupledSolve::Device,
+            other => other,
+        }
+    }
+}
+
 /// Every world's bodies and joints, and what steps them.
 pub struct ArticulatedSim {
     pub model: Model,
@@ -131,6 +156,14 @@ impl ArticulatedSim {
         Ok(())
     }
 
+    /// Solves where `solve` resolves to on `gpu` (the host unless it resolves to the device).
+    pub fn solve_on(&mut self, gpu: &GpuContext, solve: CoupledSolve) -> Result<()> {
+        if solve.resolve(gpu) == CoupledSolve::Device && self.device.is_none() {
+            self.use_device_solver(gpu)?;
+        }
+        Ok(())
+    }
+
     /// Whether the coupled solve runs on the device.
     pub fn on_device(&self) -> bool {
         self.device.is_some()
@@ -216,5 +249,18 @@ impl ArticulatedSim {
             None => self.warm.pair_impulse(world, pair),
         };
         impulse * (self.solver.substeps as f32 / self.solver.dt)
+    }
+
+    /// [`pair_force`](Self::pair_force) of each of `pairs` in every world, shape [world_count *
+    /// pairs.len()] (world-major). On the device one readback of every world's rows serves them all.
+    pub fn pair_forces(&self, gpu: &GpuContext, pairs: &[usize]) -> Vec<Vec3> {
+        let per_s = self.solver.substeps as f32 / self.solver.dt;
+        match &self.device {
+            Some(dev) => dev.pair_impulses(gpu, pairs).into_iter().map(|i| i * per_s).collect(),
+            None => (0..self.world_count())
+                .flat_map(|w| pairs.iter().map(move |&p| (w, p)))
+                .map(|(w, p)| self.warm.pair_impulse(w, p) * per_s)
+                .collect(),
+        }
     }
 }

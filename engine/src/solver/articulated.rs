@@ -86,6 +86,22 @@ pub struct CouplingGpu {
     pub _pad: [u32; 2],
 }
 
+/// The summed impulse (world frame) of pair `pair`'s rows of frame `frame` among one pair's row slots (slots
+/// of patches unused this frame hold older rows).
+fn rows_impulse(rows: &[[[f32; 4]; 4]], pair: u32, frame: u32) -> Vec3 {
+    rows.iter()
+        .filter(|r| r[0][3].to_bits() == pair && r[3][3].to_bits() == frame)
+        .map(|r| {
+            let n = Vec3::from_slice(&r[2][..3]);
+            if n == Vec3::ZERO {
+                return Vec3::ZERO;
+            }
+            let t1 = n.any_orthonormal_vector();
+            r[1][0] * n + r[1][1] * t1 + r[1][2] * n.cross(t1)
+        })
+        .sum()
+}
+
 /// Loop passes articulated.wgsl's articulation work takes in one dispatch (one substep: everything but the
 /// rows, which the kernel adds from the frame's patch counts), each loop of p passes counted p + 1 as
 /// llvmpipe counts them; keep it in step with the shader's loops.
@@ -469,18 +485,25 @@ impl GpuArticulatedSolver {
         let first = rows_offset(self.world_count, self.body_count)
             + (world as u64 * self.max_rows as u64 + pair as u64 * rows_per_pair) * ROW_VEC4 * 16;
         let rows: Vec<[[f32; 4]; 4]> = gpu.read_buffer_range(&self.scratch, first, rows_per_pair * ROW_VEC4 * 16);
-        rows.iter()
-            // This frame's contacts of the pair (slots of patches unused this frame hold older rows).
-            .filter(|r| r[0][3].to_bits() == pair && r[3][3].to_bits() == frame)
-            .map(|r| {
-                let n = Vec3::from_slice(&r[2][..3]);
-                if n == Vec3::ZERO {
-                    return Vec3::ZERO;
-                }
-                let t1 = n.any_orthonormal_vector();
-                r[1][0] * n + r[1][1] * t1 + r[1][2] * n.cross(t1)
+        rows_impulse(&rows, pair, frame)
+    }
+
+    /// [`pair_impulse`](Self::pair_impulse) of each of `pairs` in every world, shape [world_count *
+    /// pairs.len()] (world-major), from one readback of the status and every world's rows.
+    pub fn pair_impulses(&self, gpu: &GpuContext, pairs: &[usize]) -> Vec<Vec3> {
+        assert!(pairs.iter().all(|&p| p < self.pair_count as usize), "pairs {pairs:?} of {}", self.pair_count);
+        let status: Vec<[u32; 4]> = gpu.read_buffer_prefix(&self.scratch, self.world_count as u64 * 16);
+        let rows_bytes = self.world_count as u64 * self.max_rows as u64 * ROW_VEC4 * 16;
+        let rows: Vec<[[f32; 4]; 4]> =
+            gpu.read_buffer_range(&self.scratch, rows_offset(self.world_count, self.body_count), rows_bytes);
+        let rows_per_pair = self.max_patches as usize * 4;
+        (0..self.world_count as usize)
+            .flat_map(|w| pairs.iter().map(move |&p| (w, p)))
+            .map(|(w, p)| {
+                let first = w * self.max_rows as usize + p * rows_per_pair;
+                rows_impulse(&rows[first..first + rows_per_pair], p as u32, status[w][3])
             })
-            .sum()
+            .collect()
     }
 
     /// Reads bodies, joints and per-world status back (waits for the GPU): ok is false for a world that

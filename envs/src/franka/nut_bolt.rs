@@ -24,6 +24,7 @@
 
 use factory_controllers::rotation::{pose_error, JacobianKind};
 use factory_controllers::{build, linalg, ArmBatch, Controller, ControllerConfig, Targets};
+use factory_engine::articulation::sim::CoupledSolve;
 use factory_engine::articulation::{ArticulationControl, ArticulationState};
 use factory_engine::contact::ContactConfig;
 use factory_engine::gpu::GpuContext;
@@ -147,6 +148,11 @@ pub struct FrankaNutBoltConfig {
     pub observe_finger_force: bool,
     /// Append the previous action (12) to the observation.
     pub observe_previous_action: bool,
+    /// Where the arm, fingers, nut and bolt are solved together: "host" (solver::step_cpu_articulated),
+    /// "device" (the GPU kernel, solver::articulated; lavapipe without a GPU) or "auto" (the default: the
+    /// device on a hardware GPU, the host on a software adapter, where the host was the faster at 128
+    /// worlds, docs/BENCHMARKS.md). Contacts are generated on the device either way.
+    pub solve: CoupledSolve,
 }
 
 impl Default for FrankaNutBoltConfig {
@@ -187,6 +193,7 @@ impl Default for FrankaNutBoltConfig {
             start_engaged: false,
             observe_finger_force: false,
             observe_previous_action: false,
+            solve: CoupledSolve::Auto,
         }
     }
 }
@@ -503,9 +510,10 @@ impl FrankaNutBolt {
             return Err(EnvError::Build(format!("expected 2 pad-nut contact pairs, found {}", pad_pairs.len())));
         }
         for w in 0..env_count {
-            scene.reset_world(w, reset_nut, &reset_q);
+            scene.reset_world(gpu, w, reset_nut, &reset_q);
         }
         scene.sim.sync_links();
+        scene.sim.solve_on(gpu, cfg.solve)?;
         let mut names: Vec<String> = Vec::new();
         for body in ["fingertip", "nut"] {
             for (what, axes) in [("pos_m", "xyz"), ("quat", "xyzw"), ("linvel_m_s", "xyz"), ("angvel_rad_s", "xyz")] {
@@ -586,6 +594,10 @@ impl FrankaNutBolt {
     }
 
     fn observe(&self, arm: &ArmBatch, out: &mut [f32]) {
+        // The pads' forces on the nut, every world at once (one readback where the device solves).
+        let pads: Vec<usize> = self.pad_pairs.iter().map(|&(pair, _)| pair).collect();
+        let pad_forces =
+            if self.cfg.observe_finger_force { self.scene.sim.pair_forces(self.gpu, &pads) } else { Vec::new() };
         let d = self.spec.observation_dim();
         for (w, v) in self.views(arm).iter().enumerate() {
             let o = &mut out[w * d..(w + 1) * d];
@@ -603,8 +615,8 @@ impl FrankaNutBolt {
             put(&v.nut_linvel.to_array());
             put(&v.nut_angvel.to_array());
             if self.cfg.observe_finger_force {
-                for &(pair, nut_is_query) in &self.pad_pairs {
-                    let f = self.scene.sim.pair_force(self.gpu, w, pair);
+                for (k, &(_, nut_is_query)) in self.pad_pairs.iter().enumerate() {
+                    let f = pad_forces[w * pads.len() + k];
                     put(&(if nut_is_query { f } else { -f }).to_array());
                 }
             }
@@ -623,7 +635,7 @@ impl FrankaNutBolt {
             Vec3::new(draw(r.fingertip_offset_mm[0]), draw(r.fingertip_offset_mm[1]), draw(r.fingertip_offset_mm[2]))
                 * 1e-3;
         if angle == 0.0 && o == Vec3::ZERO {
-            self.scene.reset_world(w, self.reset_nut, &self.reset_q);
+            self.scene.reset_world(self.gpu, w, self.reset_nut, &self.reset_q);
             return;
         }
         let turn = Quat::from_rotation_z(angle);
@@ -637,7 +649,7 @@ impl FrankaNutBolt {
         let half_width = 0.5 * self.scene.nb.dims.width_across_flats as f32;
         q[ARM_DOF] = half_width - o.x + 2e-4;
         q[ARM_DOF + 1] = half_width + o.x + 2e-4;
-        self.scene.reset_world(w, (nut_p, turn * self.reset_nut.1), &q);
+        self.scene.reset_world(self.gpu, w, (nut_p, turn * self.reset_nut.1), &q);
     }
 
     /// Records the step's torque norms and contact forces (before any reset clears a world's warm start).
@@ -647,16 +659,18 @@ impl FrankaNutBolt {
         let torque = (0..n).map(|w| joint_tau[w * DOF..w * DOF + ARM_DOF].iter().map(|t| t * t).sum::<f32>().sqrt());
         let mut on_nut = vec![Vec3::ZERO; n];
         let mut forces = Vec::new();
-        for (name, &(pair, nut_is_query)) in ["left_finger", "right_finger"].iter().zip(&self.pad_pairs) {
-            let f: Vec<Vec3> =
-                (0..n).map(|w| sim.pair_force(self.gpu, w, pair) * if nut_is_query { 1.0 } else { -1.0 }).collect();
+        // Both pads' pairs and the thread's, every world at once (one readback where the device solves).
+        let pairs = [self.pad_pairs[0].0, self.pad_pairs[1].0, self.scene.thread_pair];
+        let all = sim.pair_forces(self.gpu, &pairs);
+        for (k, (name, &(_, nut_is_query))) in ["left_finger", "right_finger"].iter().zip(&self.pad_pairs).enumerate() {
+            let f: Vec<Vec3> = (0..n).map(|w| all[w * 3 + k] * if nut_is_query { 1.0 } else { -1.0 }).collect();
             for w in 0..n {
                 on_nut[w] += f[w];
             }
             forces.push((name.to_string(), f.iter().map(|x| x.length()).collect()));
         }
         // The thread pair's query shape is the nut: the force on it from the bolt.
-        let bolt: Vec<Vec3> = (0..n).map(|w| sim.pair_force(self.gpu, w, self.scene.thread_pair)).collect();
+        let bolt: Vec<Vec3> = (0..n).map(|w| all[w * 3 + 2]).collect();
         for w in 0..n {
             on_nut[w] += bolt[w];
         }
@@ -721,6 +735,11 @@ impl Env for FrankaNutBolt {
 
     fn save_state(&self) -> Option<Vec<u8>> {
         let sim = &self.scene.sim;
+        // The device solve keeps its warm-start rows on the device, which these bytes do not hold: a resumed
+        // run starts fresh episodes rather than one that continues almost, not exactly.
+        if sim.on_device() {
+            return None;
+        }
         let qd: Vec<f32> = sim.state.body_qd.iter().flat_map(|[v, w]| [v.x, v.y, v.z, w.x, w.y, w.z]).collect();
         let sections: [Vec<u8>; 8] = [
             bytemuck::cast_slice(&sim.state.body_q).to_vec(),

@@ -186,13 +186,13 @@ impl NutBoltScene {
 
     /// Puts world `w`'s nut at `pose`, at rest, and its joints at `q` (at rest); forgets its warm start.
     /// Call [`ArticulatedSim::sync_links`] after the last such reset of a step.
-    pub fn reset_world(&mut self, w: usize, pose: (Vec3, Quat), q: &[f32; DOF]) {
+    pub fn reset_world(&mut self, gpu: &GpuContext, w: usize, pose: (Vec3, Quat), q: &[f32; DOF]) {
         let nb = self.sim.model.bodies.body_count();
         self.sim.state.body_q[w * nb + self.nut] = TransformGpu::new(pose.0, pose.1);
         self.sim.state.body_qd[w * nb + self.nut] = [Vec3::ZERO; 2];
         self.sim.joints.joint_q[w * DOF..(w + 1) * DOF].copy_from_slice(q);
         self.sim.joints.joint_qd[w * DOF..(w + 1) * DOF].fill(0.0);
-        self.sim.warm.clear_world(w);
+        self.sim.forget_world(gpu, w);
     }
 
     /// The controllers' view of the arm in every world (fingertip pose, twist, Jacobian, M, g).
