@@ -318,6 +318,24 @@ mod tests {
         assert_eq!((c.ppo.critic_coef, c.ppo.entropy_coef, c.ppo.minibatch_size, c.ppo.epochs), (2.0, 0.0, 512, 8));
     }
 
+    /// Every config the project ships parses and checks (a renamed or removed key breaks here, not in a
+    /// user's run), and a bad `solve` is refused naming its valid values.
+    #[test]
+    fn shipped_configs_load() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs");
+        let mut n = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                TrainConfig::load(&path, &[]).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                n += 1;
+            }
+        }
+        assert!(n >= 3, "only {n} configs in {}", dir.display());
+        let e = TrainConfig::load(&dir.join("screw.toml"), &["env.solve=gpu".into()]).unwrap_err().to_string();
+        assert!(e.contains("gpu") && e.contains("device"), "{e}");
+    }
+
     #[test]
     fn unknown_key_is_named_with_valid_ones() {
         let e = TrainConfig::from_str_with(&format!("{MIN}[ppo]\nhorizn = 3\n"), "t.toml", &[]).unwrap_err();
