@@ -15,7 +15,7 @@ use factory_engine::mesh::box_mesh;
 use factory_engine::rng::SplitMix64;
 use factory_engine::sdf::cache::SdfCache;
 use factory_engine::sdf::revolved::RevolvedSdf;
-use factory_engine::sdf::thread::{HexPrism, ThreadSdf};
+use factory_engine::sdf::thread::ThreadSdf;
 use glam::{Quat, Vec3, Vec4};
 use std::sync::Arc;
 
@@ -48,18 +48,8 @@ fn model(cache: &SdfCache) -> ContactModel {
     let grid_pair = pair_spec(&query, &tagged_box, OFFSET, cache).unwrap();
     // The ring is the SDF (an exact field takes the SDF role); the cube's triangles are queried.
     let ring_pair = pair_spec(&query, &ring_shape, OFFSET, cache).unwrap();
-    // ISO 68-1 basic M16 x 2 (as sdf::thread's tests), a 16 mm head, the tip chamfered to the root.
-    let bolt = ThreadSdf {
-        pitch: 0.002,
-        phase: 0.016,
-        pitch_radius: 0.5 * (0.016 - 0.649519 * 0.002),
-        min_radius: 0.5 * (0.016 - 1.226869 * 0.002),
-        max_radius: 0.008,
-        z_lo: 0.016,
-        z_hi: 0.041,
-        head: Some(HexPrism { apothem: 0.012, z0: 0.0, z1: 0.016 }),
-        tip_radius: 0.5 * (0.016 - 1.226869 * 0.002),
-    };
+    // ISO 68-1 basic M16 x 2, the tip chamfered to the root.
+    let bolt = ThreadSdf { tip_radius: ThreadSdf::basic_m16().min_radius, ..ThreadSdf::basic_m16() };
     let thread_pair = PairSpec {
         body_a: 0,
         a_pose: (Vec3::ZERO, Quat::IDENTITY),

@@ -57,6 +57,9 @@ pub struct EvalOptions<'a> {
     /// Fills world 0's observation (the step's input), action (clipped to [-1, 1]), reward and
     /// terminated / truncated / success flags per step.
     pub steps: Option<&'a mut Trace>,
+    /// Print a line to stderr each time another sixteenth of the episodes has ended (episodes, seated, how
+    /// they ended so far): a long evaluation shows where it is, and an interrupted one leaves its counts.
+    pub progress: bool,
 }
 
 impl Trace {
@@ -82,7 +85,8 @@ pub fn evaluate(
     device: &Device,
     opts: EvalOptions<'_>,
 ) -> EvalReport {
-    let EvalOptions { noise_seed, mut forces, mut steps } = opts;
+    let EvalOptions { noise_seed, mut forces, mut steps, progress } = opts;
+    let report_every = episodes.div_ceil(16).max(1);
     let spec = env.spec().clone();
     if let Some(t) = steps.as_deref_mut() {
         t.names = spec.observation_names.clone();
@@ -129,6 +133,7 @@ pub fn evaluate(
                 trace.rows.push(d.contact_force_norms.iter().map(|(_, v)| v[0]).collect());
             }
         }
+        let done_before = done;
         for w in 0..n {
             ret[w] += buf.reward[w] as f64;
             len[w] += 1;
@@ -146,6 +151,9 @@ pub fn evaluate(
                 ret[w] = 0.0;
                 len[w] = 0;
             }
+        }
+        if progress && done / report_every > done_before / report_every {
+            eprintln!("eval: {done} of {episodes} episodes, {succ} seated; ended: {}", ended_by.summary());
         }
     }
     EvalReport {

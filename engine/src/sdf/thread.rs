@@ -84,6 +84,23 @@ pub(crate) fn signed_from_closest(x: Vec2, c: (Vec2, bool), inside: bool, normal
 }
 
 impl ThreadSdf {
+    /// A test bolt: ISO 68-1's basic M16 x 2 profile (H = sqrt(3)/2 P, pitch diameter d - 0.6495 P, root
+    /// d - 1.2269 P with its P/4 flat), 25 mm of thread over a 16 mm head of 12 mm apothem, the tip cut
+    /// flat. The project's bolts come from `factory_assets` (ISO 965 tolerance classes).
+    pub fn basic_m16() -> ThreadSdf {
+        ThreadSdf {
+            pitch: 0.002,
+            phase: 0.016,
+            pitch_radius: 0.5 * (0.016 - 0.649519 * 0.002),
+            min_radius: 0.5 * (0.016 - 1.226869 * 0.002),
+            max_radius: 0.008,
+            z_lo: 0.016,
+            z_hi: 0.041,
+            head: Some(HexPrism { apothem: 0.012, z0: 0.0, z1: 0.016 }),
+            tip_radius: 0.0,
+        }
+    }
+
     /// Half width of the crest flat [m].
     fn crest_half_width(&self) -> f32 {
         (0.25 * self.pitch - (self.max_radius - self.pitch_radius) / SQRT3).max(0.0)
@@ -259,18 +276,7 @@ mod tests {
     use super::*;
 
     fn m16() -> ThreadSdf {
-        // ISO 68-1 basic M16x2: H = sqrt(3)/2 P, d2 = d - 0.6495 P, root d - 1.2269 P (flat P/4).
-        ThreadSdf {
-            pitch: 0.002,
-            phase: 0.016,
-            pitch_radius: 0.5 * (0.016 - 0.649519 * 0.002),
-            min_radius: 0.5 * (0.016 - 1.226869 * 0.002),
-            max_radius: 0.008,
-            z_lo: 0.016,
-            z_hi: 0.041,
-            head: Some(HexPrism { apothem: 0.012, z0: 0.0, z1: 0.016 }),
-            tip_radius: 0.0,
-        }
+        ThreadSdf::basic_m16()
     }
 
     /// The broad phase's promise (contact::model::THREAD_BOUND_SLACK): the solid lies inside the bound,

@@ -72,6 +72,7 @@ fn main() -> Result<()> {
             noise_seed: args.stochastic.then_some(args.seed),
             forces: args.forces_csv.as_ref().map(|_| &mut trace),
             steps: args.steps_csv.as_ref().map(|_| &mut steps),
+            progress: true,
         },
     );
     if let Some(path) = &args.forces_csv {
