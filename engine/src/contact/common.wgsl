@@ -62,7 +62,9 @@ struct Params {
     normal_cos: f32,
     iterations: u32,
     world_offset: u32,
-    _pad: u32,
+    // The first job of a generate dispatch (generate.wgsl; the pipeline dispatches each run of jobs of one
+    // SDF kind with its own pipeline); 0 elsewhere.
+    job_base: u32,
 }
 
 struct Pair {

@@ -132,43 +132,93 @@ fn bind_compute(pass: &mut wgpu::ComputePass, pipeline: &wgpu::ComputePipeline, 
 }
 
 /// The generation pipelines: the first pass over every job, without eviction, and the retry pass over the
-/// jobs whose patch budget overflowed (generate.wgsl).
+/// jobs whose patch budget overflowed (generate.wgsl). The first pass runs as one dispatch per run of
+/// consecutive jobs whose pairs share an SDF kind, each with a pipeline compiled for that kind alone: in one
+/// pipeline for all kinds, lavapipe ran every other kind's sampling, masked, at every descent step (the
+/// Franka Screw scene at 128 worlds: the thread pair's generation 272 ms per frame alone, 381 ms beside
+/// the pads' grid pair, whose own work is a few ms; 2026-12-05). The retry pass, rare, takes every kind.
 pub struct GenerateKernel {
-    pub pipeline: wgpu::ComputePipeline,
+    /// The first pass's pipelines, one per SDF kind (`model.rs` PairGpu::sdf_kind) in `runs`.
+    pub first: Vec<(u32, wgpu::ComputePipeline)>,
+    /// The first pass's dispatches: (index into `first`, first job, jobs), covering every job in order.
+    pub runs: Vec<(usize, u32, u32)>,
     pub retry: wgpu::ComputePipeline,
 }
 
+impl SdfKinds {
+    /// The one kind `kind` (0 grid, 1 plane, 2 thread, 3 revolved).
+    pub fn only(kind: u32) -> Self {
+        SdfKinds { grid: kind == 0, plane: kind == 1, thread: kind == 2, revolved: kind == 3 }
+    }
+}
+
 impl GenerateKernel {
-    /// `subgroups`: see [`reduce_with_subgroups`].
-    pub fn new(device: &wgpu::Device, cfg: &ContactConfig, kinds: SdfKinds, subgroups: bool) -> Self {
-        let source = shader_source_wg(
-            GENERATE_WGSL,
-            cfg.max_patches,
-            cfg.workgroup_size,
-            cfg.candidates_per_invocation,
-            kinds,
-            subgroups,
-        );
+    /// The pipelines for `flat`'s jobs. `subgroups`: see [`reduce_with_subgroups`].
+    pub fn new(device: &wgpu::Device, cfg: &ContactConfig, flat: &FlatModel, subgroups: bool) -> Self {
+        let source = |kinds| {
+            shader_source_wg(
+                GENERATE_WGSL,
+                cfg.max_patches,
+                cfg.workgroup_size,
+                cfg.candidates_per_invocation,
+                kinds,
+                subgroups,
+            )
+        };
         let constants = [("INTERLEAVED_DESCENT", if cfg.interleaved_descent { 1.0 } else { 0.0 })];
+        let mut first: Vec<(u32, wgpu::ComputePipeline)> = Vec::new();
+        let mut runs: Vec<(usize, u32, u32)> = Vec::new();
+        for (j, job) in flat.jobs.iter().enumerate() {
+            let kind = flat.pairs[job.pair as usize].sdf_kind;
+            let p = match first.iter().position(|(k, _)| *k == kind) {
+                Some(p) => p,
+                None => {
+                    let pipeline = compute_pipeline_with(
+                        device,
+                        "contact-generate",
+                        &source(SdfKinds::only(kind)),
+                        "generate",
+                        &constants,
+                    );
+                    first.push((kind, pipeline));
+                    first.len() - 1
+                }
+            };
+            match runs.last_mut() {
+                Some((q, _, n)) if *q == p => *n += 1,
+                _ => runs.push((p, j as u32, 1)),
+            }
+        }
         GenerateKernel {
-            pipeline: compute_pipeline_with(device, "contact-generate", &source, "generate", &constants),
-            retry: compute_pipeline_with(device, "contact-generate-retry", &source, "generate_retry", &constants),
+            first,
+            runs,
+            retry: compute_pipeline_with(
+                device,
+                "contact-generate-retry",
+                &source(SdfKinds::of(&flat.pairs)),
+                "generate_retry",
+                &constants,
+            ),
         }
     }
 
-    /// Records both passes: `job_count` x `world_count` workgroups, then the retry pass's indirect dispatch
-    /// from `retry_args`. `groups` binds the first pass (group 2 with the retry list and `retry_args`),
-    /// `retry_groups` the retry pass (group 2 with the retry list only: `retry_args` is its dispatch size).
+    /// Records both passes: the first pass's runs, `groups[r]` binding run r (its group 0 holds the
+    /// parameters with the run's first job), each over `world_count` worlds, then the retry pass's indirect
+    /// dispatch from `retry_args`. The first pass's group 2 holds the retry list and `retry_args`;
+    /// `retry_groups` bind the retry pass (group 2 with the retry list only: `retry_args` is its dispatch
+    /// size).
     pub fn dispatch(
         &self,
         pass: &mut wgpu::ComputePass,
-        groups: [&wgpu::BindGroup; 3],
+        groups: &[[wgpu::BindGroup; 3]],
         retry_groups: [&wgpu::BindGroup; 3],
         retry_args: &wgpu::Buffer,
-        job_count: u32,
         world_count: u32,
     ) {
-        dispatch_compute(pass, &self.pipeline, groups, job_count, world_count);
+        for (&(p, _, jobs), g) in self.runs.iter().zip(groups) {
+            let [a, b, c] = g;
+            dispatch_compute(pass, &self.first[p].1, [a, b, c], jobs, world_count);
+        }
         bind_compute(pass, &self.retry, retry_groups);
         pass.dispatch_workgroups_indirect(retry_args, 0);
     }
@@ -440,6 +490,6 @@ pub fn params(flat: &FlatModel, body_count: u32, world_count: u32, cfg: &Contact
         normal_cos: cfg.normal_cos,
         iterations: cfg.iterations,
         world_offset: 0,
-        _pad: 0,
+        job_base: 0,
     }
 }

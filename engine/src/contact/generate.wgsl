@@ -37,7 +37,7 @@ const RETRY_ROW: u32 = 65535u; // the least max_compute_workgroups_per_dimension
 
 @compute @workgroup_size(WG)
 fn generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
-    let job_index = wid.x;
+    let job_index = wid.x + params.job_base;
     let world = wid.y + params.world_offset;
     if (run_job(lid, job_index, world, false)) {
         return;

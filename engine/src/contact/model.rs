@@ -226,7 +226,8 @@ pub struct ParamsGpu {
     pub normal_cos: f32,
     pub iterations: u32,
     pub world_offset: u32,
-    pub _pad: u32,
+    /// The first job of a generate dispatch (one per run of jobs whose pairs share an SDF kind); 0 elsewhere.
+    pub job_base: u32,
 }
 
 /// GPU mirror of `PatchOut`: normal xyz + area w, then 4 slots of point xyz + depth w (3e38 = empty).

@@ -4,7 +4,7 @@
 
 use super::generate::{generate_job_cpu, params, GenerateKernel, Xf};
 use super::merge::{merge_cpu, MergeKernel};
-use super::model::{auto_chunk, ContactModel, FlatModel, PatchGpu};
+use super::model::{auto_chunk, ContactModel, FlatModel, ParamsGpu, PatchGpu};
 use super::normals::{contact_normal_cpu, NormalsKernel};
 use super::{Contact, ContactConfig, Patch};
 use crate::error::{EngineError, Result};
@@ -94,7 +94,8 @@ pub struct ContactPipeline {
     pub contact_normals: wgpu::Buffer,
     normals: NormalsKernel,
     normals_groups: [wgpu::BindGroup; 3],
-    gen_groups: [wgpu::BindGroup; 3],
+    /// The first generate pass's bind groups, per run of jobs of one SDF kind (GenerateKernel::runs).
+    gen_groups: Vec<[wgpu::BindGroup; 3]>,
     /// The retry pass's bind groups (generate.wgsl; automatic layouts belong to one pipeline).
     retry_groups: [wgpu::BindGroup; 3],
     /// Jobs whose patch budget overflowed in the first generate pass: a count, then (job, world) per job.
@@ -205,7 +206,7 @@ impl ContactPipeline {
         };
         let kinds = super::generate::SdfKinds::of(&flat.pairs);
         let subgroups = super::generate::reduce_with_subgroups(gpu, cfg);
-        let generate = GenerateKernel::new(dev, cfg, kinds, subgroups);
+        let generate = GenerateKernel::new(dev, cfg, &flat, subgroups);
         let normals = NormalsKernel::new(dev, cfg, kinds);
         let contact_normals = gpu.storage_buffer_zeroed(
             "contact_normals",
@@ -214,13 +215,22 @@ impl ContactPipeline {
         let group = |pipeline: &wgpu::ComputePipeline, index: u32, buffers: &[&wgpu::Buffer]| {
             gpu.bind_group(pipeline, index, buffers)
         };
-        let gp = &generate.pipeline;
         let (retry_jobs, retry_args) = super::generate::retry_buffers(gpu, job_count, world_count);
-        let gen_groups = [
-            group(gp, 0, &[&uniform, &pairs, &jobs, &tri_verts, &sdf_values]),
-            group(gp, 1, &[&body_q]),
-            group(gp, 2, &[&job_patches, &job_patch_count, &pair_candidates, &retry_jobs, &retry_args]),
-        ];
+        // Per run of jobs of one SDF kind: the parameters with its first job, and its pipeline's groups.
+        let gen_groups = generate
+            .runs
+            .iter()
+            .map(|&(pi, base, _)| {
+                let gp = &generate.first[pi].1;
+                let run_params =
+                    gpu.uniform_buffer("contact-params", bytemuck::bytes_of(&ParamsGpu { job_base: base, ..p }));
+                [
+                    group(gp, 0, &[&run_params, &pairs, &jobs, &tri_verts, &sdf_values]),
+                    group(gp, 1, &[&body_q]),
+                    group(gp, 2, &[&job_patches, &job_patch_count, &pair_candidates, &retry_jobs, &retry_args]),
+                ]
+            })
+            .collect();
         let rp = &generate.retry;
         let retry_groups = [
             group(rp, 0, &[&uniform, &pairs, &jobs, &tri_verts, &sdf_values]),
@@ -287,10 +297,9 @@ impl ContactPipeline {
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("contacts"), timestamp_writes: None });
         self.generate.dispatch(
             &mut pass,
-            refs(&self.gen_groups),
+            &self.gen_groups,
             refs(&self.retry_groups),
             &self.retry_args,
-            self.flat.jobs.len() as u32,
             self.world_count,
         );
         if let Some((merge, groups)) = &self.merge {

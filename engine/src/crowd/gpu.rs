@@ -269,7 +269,7 @@ impl CrowdPipeline {
             normal_cos: contact.normal_cos,
             iterations: contact.iterations,
             world_offset: 0,
-            _pad: 0,
+            job_base: 0,
         };
         let sp = solver_params(solver, bodies, world_count, cfg.max_pairs, cfg.max_patches_per_world * 4, 0);
         let dev = &gpu.device;
