@@ -161,6 +161,27 @@ pub struct FrankaNutBoltReport {
     pub adapter: String,
 }
 
+impl FrankaNutBoltReport {
+    /// One line for a log: where the solve ran, success, mean time to seat, stages reached, deepest
+    /// contact and the frame's times.
+    pub fn summary(&self) -> String {
+        format!(
+            "{} worlds, {:?} solve: success {:.3}, mean time to seat {:.2} s, stages reached {:?}, deepest contact \
+             {:.3} mm, {:.1} ms per frame (handling {:.1}, solve {:.1}, controller {:.2})",
+            self.worlds,
+            self.solve,
+            self.success_rate,
+            self.mean_success_s,
+            self.stage_reached,
+            self.max_penetration_mm,
+            self.ms_per_frame,
+            self.handling_ms_per_frame,
+            self.solve_ms_per_frame,
+            self.controller_ms_per_frame
+        )
+    }
+}
+
 /// A stage's share of the frames and their times [ms per frame] (see [`FrankaNutBoltReport::phases`]).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct PhaseTimes {

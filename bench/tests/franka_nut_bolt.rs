@@ -74,18 +74,7 @@ const SEATED_MIN: f64 = 0.95;
 fn franka_nut_bolt_seats_the_nut_in_most_of_64_worlds() {
     let gpu = GpuContext::global().unwrap();
     let report = run_franka_nut_bolt(gpu, &FrankaNutBoltRun { worlds: 64, ..Default::default() }).unwrap();
-    eprintln!(
-        "64 worlds: success {:.3}, mean time to seat {:.2} s, stages reached {:?}, deepest contact {:.3} mm, \
-         {:.1} ms per frame (handling {:.1}, solve {:.1}, controller {:.2})",
-        report.success_rate,
-        report.mean_success_s,
-        report.stage_reached,
-        report.max_penetration_mm,
-        report.ms_per_frame,
-        report.handling_ms_per_frame,
-        report.solve_ms_per_frame,
-        report.controller_ms_per_frame
-    );
+    eprintln!("{}", report.summary());
     for (w, (h, off)) in report.nut_height_mm.iter().zip(&report.nut_off_axis_mm).enumerate() {
         if *h > 2.0 || *off > 8.0 {
             eprintln!("  world {w}: nut {h:.2} mm above seated, {off:.2} mm off the bolt's axis");
@@ -105,17 +94,7 @@ fn the_device_solve_seats_the_nut() {
     let report =
         run_franka_nut_bolt(gpu, &FrankaNutBoltRun { worlds: 1, solve: CoupledSolve::Device, ..Default::default() })
             .unwrap();
-    eprintln!(
-        "device, 1 world: success {}, seated at {:.2} s, stages reached {:?}, deepest contact {:.3} mm, {:.1} ms per \
-         frame (handling {:.1}, solve {:.1})",
-        report.success_rate,
-        report.mean_success_s,
-        report.stage_reached,
-        report.max_penetration_mm,
-        report.ms_per_frame,
-        report.handling_ms_per_frame,
-        report.solve_ms_per_frame
-    );
+    eprintln!("{}", report.summary());
     assert_eq!(report.solve, CoupledSolve::Device);
     assert_eq!(report.diverged_worlds, 0);
     assert_eq!(report.success_rate, 1.0, "the nut ended {:?} mm above its seat", report.nut_height_mm);

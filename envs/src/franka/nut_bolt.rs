@@ -595,7 +595,7 @@ impl FrankaNutBolt {
 
     fn observe(&self, arm: &ArmBatch, out: &mut [f32]) {
         // The pads' forces on the nut, every world at once (one readback where the device solves).
-        let pads: Vec<usize> = self.pad_pairs.iter().map(|&(pair, _)| pair).collect();
+        let pads = [self.pad_pairs[0].0, self.pad_pairs[1].0];
         let pad_forces =
             if self.cfg.observe_finger_force { self.scene.sim.pair_forces(self.gpu, &pads) } else { Vec::new() };
         let d = self.spec.observation_dim();
