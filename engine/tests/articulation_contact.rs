@@ -9,7 +9,9 @@ use factory_engine::builder::{box_mass_properties, ModelBuilder};
 use factory_engine::contact::{ContactConfig, TransformGpu};
 use factory_engine::gpu::GpuContext;
 use factory_engine::sdf::cache::SdfCache;
-use factory_engine::solver::{BodyState, Control, SolverConfig};
+use factory_engine::solver::{
+    step_cpu_articulated_with, ArticulationStep, BodyState, Control, PatchSweep, SolverConfig, WarmStart,
+};
 use factory_engine::urdf::{load_urdf, UrdfModel};
 use glam::{Quat, Vec3};
 use std::path::PathBuf;
@@ -131,24 +133,80 @@ impl Grip {
         hq.inverse() * (Vec3::from_slice(&t.p[..3]) - hp)
     }
 
-    /// One frame with the arm held at the Screw pose (drives plus gravity feed-forward) and the fingers
-    /// driven towards `finger_target` [m].
-    fn step(&mut self, finger_target: f32) {
+    /// The arm held at the Screw pose (drives plus gravity feed-forward) and the fingers driven towards
+    /// `finger_target` [m].
+    fn control(&self, finger_target: f32) -> ArticulationControl {
         let art = &self.sim.articulation;
         let dof = art.dof_count();
         let q = self.sim.joints.joint_q[..dof].to_vec();
         let qd = self.sim.joints.joint_qd[..dof].to_vec();
         let d = world_dynamics(art, &q, &qd, &art.frame("panda_hand").unwrap());
-        let tau = d.gravity_torque.clone();
         let mut target = Q_SCREW.to_vec();
         target.extend([finger_target, finger_target]);
-        let diverged = self.sim.step(
-            GpuContext::global().unwrap(),
-            &Control::default(),
-            &ArticulationControl { joint_tau: tau, joint_target_q: target },
-        );
+        ArticulationControl { joint_tau: d.gravity_torque.clone(), joint_target_q: target }
+    }
+
+    /// One frame under [`control`](Self::control).
+    fn step(&mut self, finger_target: f32) {
+        let control = self.control(finger_target);
+        let diverged = self.sim.step(GpuContext::global().unwrap(), &Control::default(), &control);
         assert!(!diverged[0], "the world diverged");
     }
+}
+
+/// The pads' patches swept 8 times per sweep (the Screw env's `link_patch_iters`) as blocks on their
+/// Delassus matrices, the default, against row by row through the bodies (`PatchSweep::Rows`, what the
+/// device kernel does): at every frame of 1 s of squeezing and holding, one step from the same state and
+/// contacts gives the same joints, block pose and contact impulses up to rounding.
+#[test]
+fn patch_blocks_step_as_row_by_row_passes_do() {
+    let mut g = grip_scene(1.0e-3);
+    g.sim.solver.link_patch_iters = 8;
+    let gpu = GpuContext::global().unwrap();
+    let pairs = g.sim.pipe.flat.pairs.len();
+    let (mut worst_q, mut worst_block, mut worst_imp) = (0.0f32, 0.0f32, 0.0f32);
+    for frame in 1..=60 {
+        let control = g.control(0.0);
+        let sim = &mut g.sim;
+        sim.pipe.write_body_q(gpu, &sim.state.body_q);
+        sim.pipe.run(gpu);
+        let contacts = sim.pipe.read(gpu);
+        let run = |sweep: PatchSweep| {
+            let (mut state, mut joints, mut warm) = (sim.state.clone(), sim.joints.clone(), sim.warm.clone());
+            let ok = step_cpu_articulated_with(
+                &sim.model.bodies,
+                &mut state,
+                &contacts,
+                &sim.pipe.flat,
+                &sim.solver,
+                &Control::default(),
+                &mut warm,
+                Some(ArticulationStep { model: &sim.articulation, state: &mut joints, control: &control }),
+                sweep,
+            );
+            assert!(ok[0], "frame {frame}: {sweep:?} diverged");
+            (state, joints, warm)
+        };
+        let (block, rows) = (run(PatchSweep::Block), run(PatchSweep::Rows));
+        let dq = block.1.joint_q.iter().zip(&rows.1.joint_q).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+        let pos = |s: &BodyState| Vec3::from_slice(&s.body_q[g.nut].p[..3]);
+        let dblock = (pos(&block.0) - pos(&rows.0)).length();
+        let imp = |w: &WarmStart| (0..pairs).map(|p| w.pair_impulse(0, p)).collect::<Vec<_>>();
+        let (ib, ir) = (imp(&block.2), imp(&rows.2));
+        let squeeze: f32 = ir.iter().map(|i| i.length()).sum();
+        let dimp = ib.iter().zip(&ir).map(|(a, b)| (*a - *b).length()).fold(0.0, f32::max);
+        (worst_q, worst_block, worst_imp) = (worst_q.max(dq), worst_block.max(dblock), worst_imp.max(dimp));
+        // Rounding: 32-bit sums in another order over 2 x 16 sweeps of 8 passes.
+        assert!(dq < 1e-6, "frame {frame}: joints differ by {dq} rad");
+        assert!(dblock < 1e-7, "frame {frame}: the block's pose differs by {dblock} m");
+        assert!(dimp <= 1e-3 * squeeze.max(1e-3), "frame {frame}: impulses differ by {dimp} N s of {squeeze}");
+        if frame == 60 {
+            assert!(squeeze > 0.0, "the pads squeeze the block");
+        }
+        (g.sim.state, g.sim.joints, g.sim.warm) = block;
+        g.sim.sync_links();
+    }
+    eprintln!("blocks vs rows over 60 frames: joints {worst_q:.2e} rad, block {worst_block:.2e} m, impulse {worst_imp:.2e} N s");
 }
 
 #[test]

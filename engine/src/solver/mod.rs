@@ -145,7 +145,8 @@ pub struct SolverConfig {
     /// Gauss-Seidel passes per sweep over each patch that touches an articulation link (at least
     /// `patch_iters`; [`step_cpu_articulated`] only). A finger pad holding a 30 g nut against a 20 kg arm
     /// is a chain with a mass ratio near 1:100, which plain sweeps converge slowly: the pads crept down a
-    /// nut pressed on its bolt. The rows are few (a pad's few contacts), so extra passes are cheap.
+    /// nut pressed on its bolt. The rows are few (a pad's few contacts), and the passes after a sweep's
+    /// first run on the patch's own Delassus matrix ([`PatchSweep::Block`]), so extra passes are cheap.
     pub link_patch_iters: u32,
     /// Coulomb friction per patch (the paper's III-B: "Coulomb friction per patch"): each contact may carry
     /// tangential impulse up to mu times an equal share of its patch's total normal impulse, so the patch
@@ -501,7 +502,36 @@ pub fn step_cpu_articulated(
     cfg: &SolverConfig,
     control: &Control,
     warm: &mut WarmStart,
+    art: Option<ArticulationStep>,
+) -> Vec<bool> {
+    step_cpu_articulated_with(model, state, contacts, flat, cfg, control, warm, art, PatchSweep::Block)
+}
+
+/// How [`step_cpu_articulated`] runs a patch's repeated passes within a sweep (`patch_iters`,
+/// `link_patch_iters`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PatchSweep {
+    /// On the patch's Delassus matrix, where every row has its articulated-substep cache (the default; see
+    /// `solve_patch_block`).
+    #[default]
+    Block,
+    /// Row by row through the bodies' velocities, every pass (what solver.wgsl and articulated.wgsl do):
+    /// the reference the blocks are tested against.
+    Rows,
+}
+
+/// [`step_cpu_articulated`] with the patches' passes run as `sweep` says.
+#[allow(clippy::too_many_arguments)]
+pub fn step_cpu_articulated_with(
+    model: &BodyModel,
+    state: &mut BodyState,
+    contacts: &ContactsHost,
+    flat: &FlatModel,
+    cfg: &SolverConfig,
+    control: &Control,
+    warm: &mut WarmStart,
     mut art: Option<ArticulationStep>,
+    sweep: PatchSweep,
 ) -> Vec<bool> {
     let nb = model.body_count();
     // Link bodies in slot order, and each body's slot.
@@ -594,6 +624,8 @@ pub fn step_cpu_articulated(
                     }
                 }
             }
+            // Each link patch's Delassus matrix for the substep's sweeps (solve_rows).
+            let mut blocks = (sweep == PatchSweep::Block).then(Vec::new);
             for _ in 0..cfg.substeps {
                 // The articulation's velocity before contact, and how its links answer impulses this substep.
                 if let (Some(a), Some((q, qd, tau, target)), Some(lp)) =
@@ -634,7 +666,7 @@ pub fn step_cpu_articulated(
                 // The poses stand still during the sweeps, so each row's separation and normal are sampled in
                 // the first sweep and reused by the others (sampled again once the bodies have moved).
                 for it in 0..cfg.pos_iters {
-                    solve_rows(&ctx, &mut rows, &pos, &mut vel, true, it == 0);
+                    solve_rows(&ctx, &mut rows, &pos, &mut vel, true, it == 0, blocks.as_mut());
                 }
                 for i in 0..nb {
                     if (ctx.inv_m(i) > 0.0 || model.is_kinematic(i)) && slot[i].is_none() {
@@ -662,7 +694,7 @@ pub fn step_cpu_articulated(
                     }
                 }
                 for it in 0..cfg.vel_iters {
-                    solve_rows(&ctx, &mut rows, &pos, &mut vel, false, it == 0);
+                    solve_rows(&ctx, &mut rows, &pos, &mut vel, false, it == 0, blocks.as_mut());
                 }
                 if let (Some((_, qd, _, _)), Some(resp)) = (joints.as_mut(), ctx.links.as_ref()) {
                     resp.apply_impulses(&vel.phi, qd);
@@ -886,13 +918,183 @@ struct Lever {
 
 /// One sweep over the rows, in (pair, patch, slot) order: each patch's rows are solved once with
 /// `resample`, then `patch_iters - 1` more times on the sampled geometry (solver.wgsl's `sweep`).
-fn solve_rows(ctx: &Step, rows: &mut [Row], pos: &[(Vec3, Quat)], vel: &mut Vels, bias: bool, resample: bool) {
-    for patch in rows.chunk_by_mut(|x, y| (x.pair, x.patch) == (y.pair, y.patch)) {
+///
+/// In an articulated substep a patch's passes after its first (which samples the rows and builds their
+/// caches) run as one block ([`solve_patch_block`]) when every row has its [`LinkDir`]s: the same
+/// Gauss-Seidel updates in the same order, on the patch's own Delassus matrix. `blocks` holds those
+/// matrices, one per patch in row order, built at the patch's first block after a resampling sweep (the
+/// caches they come from stand until then); None: every pass row by row ([`PatchSweep::Rows`]).
+fn solve_rows(
+    ctx: &Step,
+    rows: &mut [Row],
+    pos: &[(Vec3, Quat)],
+    vel: &mut Vels,
+    bias: bool,
+    resample: bool,
+    mut blocks: Option<&mut Vec<Option<PatchBlock>>>,
+) {
+    if let (true, Some(b)) = (resample, blocks.as_mut()) {
+        b.clear();
+    }
+    for (k, patch) in rows.chunk_by_mut(|x, y| (x.pair, x.patch) == (y.pair, y.patch)).enumerate() {
         let link = ctx.slot[patch[0].a].is_some() || ctx.slot[patch[0].b].is_some();
         let passes = if link { ctx.cfg.patch_iters.max(ctx.cfg.link_patch_iters) } else { ctx.cfg.patch_iters };
-        for pass in 0..passes {
+        let mut pass = 0;
+        if resample {
             for i in 0..patch.len() {
-                solve_row(ctx, patch, i, pos, vel, bias, resample && pass == 0);
+                solve_row(ctx, patch, i, pos, vel, bias, true);
+            }
+            pass = 1;
+        }
+        if let (true, Some(blocks)) = (passes - pass.min(passes) >= 2, blocks.as_mut()) {
+            if blocks.len() <= k {
+                blocks.resize(k + 1, None);
+            }
+            if blocks[k].is_none() {
+                blocks[k] = PatchBlock::new(patch);
+            }
+            if let Some(block) = &blocks[k] {
+                solve_patch_block(ctx, patch, block, vel, bias, passes - pass);
+                continue;
+            }
+        }
+        for _ in pass..passes {
+            for i in 0..patch.len() {
+                solve_row(ctx, patch, i, pos, vel, bias, false);
+            }
+        }
+    }
+}
+
+/// The most rows a patch holds (its contact slots), and their directions (normal, two tangents each).
+const PATCH_ROWS: usize = 4;
+const PATCH_DIRS: usize = 3 * PATCH_ROWS;
+
+/// A patch's Delassus matrix over its rows' directions (row j's normal, tangent 1, tangent 2 at 3j, 3j + 1,
+/// 3j + 2): `w[d][e]` is the change of direction d's relative velocity [m/s] per N s along direction e,
+/// from the [`LinkDir`]s (what `e.apply` moves, read as `d.rel` reads it). Rows without a normal this
+/// substep have zero rows and columns.
+#[derive(Clone, Debug)]
+struct PatchBlock {
+    w: [[f32; PATCH_DIRS]; PATCH_DIRS],
+}
+
+impl PatchBlock {
+    /// The block of `patch`, or None where a row that takes part has no [`LinkDir`]s (no articulation
+    /// response, or more link bodies than one holds) or the patch has more rows than slots.
+    fn new(patch: &[Row]) -> Option<Self> {
+        if patch.len() > PATCH_ROWS {
+            return None;
+        }
+        let mut dirs: [Option<&[LinkDir; 3]>; PATCH_ROWS] = [None; PATCH_ROWS];
+        for (j, r) in patch.iter().enumerate() {
+            if r.normal.is_some() {
+                dirs[j] = Some(r.cache.as_ref()?.link.as_ref()?);
+            }
+        }
+        let mut w = [[0.0f32; PATCH_DIRS]; PATCH_DIRS];
+        for (i, ri) in patch.iter().enumerate() {
+            let Some(di) = dirs[i] else { continue };
+            for (j, dj) in dirs.iter().enumerate().take(patch.len()) {
+                let Some(dj) = dj else { continue };
+                for (a, da) in di.iter().enumerate() {
+                    for (b, db) in dj.iter().enumerate() {
+                        let mut x = 0.0;
+                        for (body, dv) in &db.moved[..db.moved_len as usize] {
+                            let body = *body as usize;
+                            if body == ri.a {
+                                x += dv[0].dot(da.d) + dv[1].dot(da.jac[0]);
+                            }
+                            if body == ri.b {
+                                x -= dv[0].dot(da.d) + dv[1].dot(da.jac[1]);
+                            }
+                        }
+                        w[3 * i + a][3 * j + b] = x;
+                    }
+                }
+            }
+        }
+        Some(PatchBlock { w })
+    }
+}
+
+/// `passes` Gauss-Seidel passes over a patch's rows on their sampled geometry, as many [`solve_row`] passes
+/// without resampling: the same updates in the same order, each direction's relative velocity kept up to
+/// date through the patch's Delassus matrix instead of read from the bodies, and the passes' summed
+/// impulse changes applied to the bodies once at the end (the velocities of bodies outside the patch are
+/// not read meanwhile). Equal to the row passes up to rounding. Why: a finger pad's rows are swept
+/// `link_patch_iters` (8) times per sweep, and each row pass reads two bodies and moves every link body
+/// (a [`LinkDir`] apply); on the 12 x 12 matrix a direction's update is 12 products.
+fn solve_patch_block(ctx: &Step, patch: &mut [Row], block: &PatchBlock, vel: &mut Vels, bias: bool, passes: u32) {
+    let (cfg, h) = (ctx.cfg, ctx.h);
+    let len = patch.len();
+    let n_dirs = 3 * len;
+    let mut rel = [0.0f32; PATCH_DIRS];
+    let mut moved = [0.0f32; PATCH_DIRS];
+    for (j, r) in patch.iter().enumerate() {
+        if let (Some(_), Some(dirs)) = (r.normal, r.cache.as_ref().and_then(|c| c.link.as_ref())) {
+            for (e, d) in dirs.iter().enumerate() {
+                rel[3 * j + e] = d.rel(vel, r.a, r.b);
+            }
+        }
+    }
+    // A change x along direction e: every direction's relative velocity follows.
+    let push = |rel: &mut [f32; PATCH_DIRS], moved: &mut [f32; PATCH_DIRS], e: usize, x: f32| {
+        moved[e] += x;
+        for (r, w) in rel[..n_dirs].iter_mut().zip(&block.w) {
+            *r += w[e] * x;
+        }
+    };
+    for _ in 0..passes {
+        for i in 0..len {
+            let r = &patch[i];
+            if r.normal.is_none() {
+                continue;
+            }
+            let Some(c) = r.cache.as_ref() else { continue };
+            let Some(dirs) = c.link.as_ref() else { continue };
+            if c.k[0] <= 0.0 {
+                continue;
+            }
+            let s = r.sep;
+            let target = if s > 0.0 {
+                -s / h
+            } else if bias {
+                (-s / h).min(cfg.max_depenetration_velocity)
+            } else {
+                0.0
+            };
+            let (mu, k, masses) = (r.mu, c.k, [dirs[0].mass, dirs[1].mass, dirs[2].mass]);
+            let dn = (target - rel[3 * i]) * masses[0];
+            let new = (r.lambda_n + dn).max(0.0);
+            let d = new - r.lambda_n;
+            patch[i].lambda_n = new;
+            push(&mut rel, &mut moved, 3 * i, d);
+            if mu > 0.0 {
+                let limit = if cfg.friction_per_patch {
+                    mu * patch.iter().map(|o| o.lambda_n).sum::<f32>() / len.max(1) as f32
+                } else {
+                    mu * new
+                };
+                for j in 0..2 {
+                    if k[1 + j] <= 0.0 {
+                        continue;
+                    }
+                    let dt = -rel[3 * i + 1 + j] * masses[1 + j];
+                    let old = patch[i].lambda_t[j];
+                    let new = (old + dt).clamp(-limit, limit);
+                    patch[i].lambda_t[j] = new;
+                    push(&mut rel, &mut moved, 3 * i + 1 + j, new - old);
+                }
+            }
+        }
+    }
+    for (j, r) in patch.iter().enumerate() {
+        if let Some(dirs) = r.cache.as_ref().and_then(|c| c.link.as_ref()) {
+            for (e, d) in dirs.iter().enumerate() {
+                if moved[3 * j + e] != 0.0 {
+                    d.apply(vel, moved[3 * j + e]);
+                }
             }
         }
     }
