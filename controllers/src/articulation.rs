@@ -3,7 +3,7 @@
 //! gravity torque, computed by the engine's CPU reference (`factory_engine::articulation::dynamics`).
 
 use crate::batch::ArmBatch;
-use factory_engine::articulation::dynamics::world_dynamics;
+use factory_engine::articulation::dynamics::{world_dynamics, WorldDynamics};
 use factory_engine::articulation::{ArticulationModel, ArticulationState, Frame};
 use rayon::prelude::*;
 
@@ -19,13 +19,26 @@ impl ArmBatch {
         ee_wrench: &[[f32; 6]],
     ) -> Self {
         let dof = model.dof_count();
-        let world_count = state.world_count(model);
         let worlds: Vec<_> = state
             .joint_q
             .par_chunks(dof)
             .zip(state.joint_qd.par_chunks(dof))
             .map(|(q, qd)| world_dynamics(model, q, qd, frame))
             .collect();
+        Self::from_dynamics(&worlds, state, arm_dof, ee_wrench)
+    }
+
+    /// The batch from every world's dynamics `worlds` (the CPU reference's, or the device kernel's read back:
+    /// `ArticulationGpu::read_dynamics`) at joint state `state`, as
+    /// [`from_articulation`](Self::from_articulation).
+    pub fn from_dynamics(
+        worlds: &[WorldDynamics],
+        state: &ArticulationState,
+        arm_dof: usize,
+        ee_wrench: &[[f32; 6]],
+    ) -> Self {
+        let world_count = worlds.len();
+        let dof = state.joint_q.len() / world_count.max(1);
         let mut b = ArmBatch::zeros(world_count, dof, arm_dof);
         b.joint_q.copy_from_slice(&state.joint_q);
         b.joint_qd.copy_from_slice(&state.joint_qd);

@@ -69,6 +69,7 @@ pub mod linalg;
 mod registry;
 pub mod rotation;
 pub mod task_space;
+pub mod task_space_gpu;
 
 pub use batch::{ArmBatch, Targets};
 pub use config::{
@@ -80,6 +81,7 @@ pub use joint_space::{IkSolver, JointSpaceController};
 pub use registry::{build, canonical_name, ALIASES, NAMES};
 pub use rotation::JacobianKind;
 pub use task_space::TaskSpaceController;
+pub use task_space_gpu::TaskSpaceGpu;
 
 /// Largest arm (joints with a Jacobian column) the fixed-size linear algebra supports.
 pub const MAX_ARM_DOF: usize = linalg::MAX_N;
@@ -115,4 +117,10 @@ pub trait Controller: Send + Sync {
     /// If the batch's `dof`/`arm_dof` differ from the controller's, or a buffer has the wrong length (the
     /// message names it).
     fn compute(&self, arm: &ArmBatch, targets: &Targets, joint_tau: &mut [f32]);
+
+    /// Hook: the controller as a task-space law, which has a device kernel ([`TaskSpaceGpu`]); None (the
+    /// default) for the others.
+    fn as_task_space(&self) -> Option<&TaskSpaceController> {
+        None
+    }
 }

@@ -152,6 +152,11 @@ impl TaskSpaceController {
         self.force.as_ref()
     }
 
+    /// What it does around its law (the finger PD, gravity compensation, limits).
+    pub(crate) fn common(&self) -> &Common {
+        &self.common
+    }
+
     /// World `w`'s arm torques (first `arm_dof` entries of `tau`) before gravity, fingers and clamping.
     fn arm_torque(&self, arm: &ArmBatch, targets: &Targets, w: usize, tau: &mut [f32]) {
         let na = arm.arm_dof;
@@ -253,5 +258,9 @@ impl Controller for TaskSpaceController {
             self.arm_torque(arm, targets, w, tau);
             self.common.finish(w, arm, targets, tau);
         }
+    }
+
+    fn as_task_space(&self) -> Option<&TaskSpaceController> {
+        Some(self)
     }
 }
