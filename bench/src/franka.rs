@@ -28,13 +28,15 @@
 
 use anyhow::{ensure, Context, Result};
 use factory_assets::NutBolt;
-use factory_controllers::{build, ArmBatch, Controller, ControllerConfig, Targets};
+use factory_controllers::{build, ArmBatch, Controller, ControllerConfig, Targets, TaskSpaceGpu};
+use factory_engine::articulation::gpu::ArticulationGpu;
 use factory_engine::articulation::sim::ArticulatedSim;
 use factory_engine::articulation::{ArticulationControl, ArticulationModel, ArticulationState, Frame};
 use factory_engine::contact::ContactConfig;
 use factory_engine::gpu::GpuContext;
 use factory_engine::rng::SplitMix64;
 use factory_engine::solver::{Control, SolverConfig};
+use factory_engine::wgpu;
 
 use factory_envs::franka::scene::{NutBoltScene, SceneConfig};
 use glam::{Quat, Vec3};
@@ -573,6 +575,13 @@ pub struct ControllerBenchReport {
     /// Each controller's `compute` (one thread), by registry name, in `NAMES` order.
     pub controller_ms: Vec<(String, f64)>,
     pub threads: usize,
+    /// On the device (`adapter`), each a submission waited for: the articulation kernel's `dynamics` (what
+    /// `arm_batch_ms` computes on the host) ...
+    pub device_dynamics_ms: f64,
+    /// ... and each task-space controller's kernel (`TaskSpaceGpu`), by registry name (the joint-space
+    /// controllers have none).
+    pub device_controller_ms: Vec<(String, f64)>,
+    pub adapter: String,
 }
 
 /// Times the control step on the Franka at `worlds` worlds in seeded joint states.
@@ -617,7 +626,36 @@ pub fn bench_controllers(worlds: u32, repeats: u32) -> Result<ControllerBenchRep
         let c = build(&ControllerConfig::default_for(name)?, 9, 7)?;
         controller_ms.push((name.to_string(), time(&mut || c.compute(&arm, &targets, &mut tau))));
     }
-    Ok(ControllerBenchReport { worlds, repeats, arm_batch_ms, controller_ms, threads: rayon_threads() })
+    let gpu = GpuContext::global()?;
+    let dev = ArticulationGpu::new(gpu, &art, worlds, &tip, 1.0 / 60.0, 2)?;
+    dev.write_state(gpu, &state)?;
+    let submit = |f: &dyn Fn(&mut wgpu::CommandEncoder)| {
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        f(&mut enc);
+        gpu.queue.submit([enc.finish()]);
+        gpu.wait();
+    };
+    let device_dynamics_ms = time(&mut || submit(&|e| dev.encode_dynamics(e)));
+    let mut device_controller_ms = Vec::new();
+    for name in factory_controllers::NAMES {
+        let c = build(&ControllerConfig::default_for(name)?, 9, 7)?;
+        if c.as_task_space().is_none() {
+            continue;
+        }
+        let k = TaskSpaceGpu::new(gpu, c.as_ref(), &dev)?;
+        k.write_inputs(gpu, &targets, &[])?;
+        device_controller_ms.push((name.to_string(), time(&mut || submit(&|e| k.encode(e)))));
+    }
+    Ok(ControllerBenchReport {
+        worlds,
+        repeats,
+        arm_batch_ms,
+        controller_ms,
+        threads: rayon_threads(),
+        device_dynamics_ms,
+        device_controller_ms,
+        adapter: gpu.info.name.clone(),
+    })
 }
 
 fn rayon_threads() -> usize {

@@ -257,7 +257,8 @@ enum Cmd {
     },
     /// Cost of a control step for the Franka at N worlds: the articulation quantities the controllers read
     /// (fingertip pose, Jacobian, mass matrix, gravity; `ArmBatch::from_articulation`) and each of the
-    /// seven controllers' torques, on the host.
+    /// seven controllers' torques, on the host; then the same on the device (the articulation kernel's
+    /// dynamics and the task-space controllers' kernel).
     Controllers {
         /// Parallel worlds.
         #[arg(long, default_value_t = 128)]
