@@ -1,5 +1,6 @@
 //! Franka environments: the shared nut-and-bolt scene ([`scene`]) and the FrankaNutBolt env with its task
 //! plugins ([`nut_bolt`]; today the Screw task).
 
+pub mod action_gpu;
 pub mod nut_bolt;
 pub mod scene;

@@ -680,27 +680,33 @@ impl FrankaNutBolt {
     }
 
     fn targets(&self, arm: &ArmBatch, action: &[f32]) -> Targets {
-        let c = &self.cfg;
-        let mut t = Targets::hold(arm);
-        for w in 0..self.spec.env_count {
-            let a: Vec<f32> = action[w * 12..(w + 1) * 12].iter().map(|x| x.clamp(-1.0, 1.0)).collect();
-            let dp = Vec3::new(a[0], a[1], a[2]) * Vec3::from_array(c.pos_action_scale);
-            let yaw = if c.unidirectional_rot { -(a[5] + 1.0) * 0.5 } else { a[5] };
-            let dr = Vec3::new(a[3], a[4], yaw) * Vec3::from_array(c.rot_action_scale);
-            t.ee_pos[w] = arm.ee_pos[w] + dp;
-            let angle = dr.length();
-            t.ee_quat[w] =
-                if angle > 1e-6 { Quat::from_axis_angle(dr / angle, angle) * arm.ee_quat[w] } else { arm.ee_quat[w] };
-            for k in 0..3 {
-                t.ee_wrench[w][k] = a[6 + k] * c.force_action_scale[k];
-                t.ee_wrench[w][3 + k] = a[9 + k] * c.torque_action_scale[k];
-            }
-            // The gripper stays closed (its drives squeeze the nut).
-            t.gripper_q[w * 2] = 0.0;
-            t.gripper_q[w * 2 + 1] = 0.0;
-        }
-        t
+        action_targets(&self.cfg, arm, action)
     }
+}
+
+/// The controller's targets for every world's action (shape [world_count * 12], clipped to [-1, 1]): the
+/// module docs' mapping, relative to the fingertip pose in `arm`; the fingers' targets closed (their drives
+/// squeeze the nut). The device twin is [`super::action_gpu::ActionGpu`].
+pub fn action_targets(c: &FrankaNutBoltConfig, arm: &ArmBatch, action: &[f32]) -> Targets {
+    let mut t = Targets::hold(arm);
+    for w in 0..arm.world_count {
+        let a: Vec<f32> = action[w * 12..(w + 1) * 12].iter().map(|x| x.clamp(-1.0, 1.0)).collect();
+        let dp = Vec3::new(a[0], a[1], a[2]) * Vec3::from_array(c.pos_action_scale);
+        let yaw = if c.unidirectional_rot { -(a[5] + 1.0) * 0.5 } else { a[5] };
+        let dr = Vec3::new(a[3], a[4], yaw) * Vec3::from_array(c.rot_action_scale);
+        t.ee_pos[w] = arm.ee_pos[w] + dp;
+        let angle = dr.length();
+        t.ee_quat[w] =
+            if angle > 1e-6 { Quat::from_axis_angle(dr / angle, angle) * arm.ee_quat[w] } else { arm.ee_quat[w] };
+        for k in 0..3 {
+            t.ee_wrench[w][k] = a[6 + k] * c.force_action_scale[k];
+            t.ee_wrench[w][3 + k] = a[9 + k] * c.torque_action_scale[k];
+        }
+        // The gripper stays closed (its drives squeeze the nut).
+        t.gripper_q[w * 2] = 0.0;
+        t.gripper_q[w * 2 + 1] = 0.0;
+    }
+    t
 }
 
 impl Env for FrankaNutBolt {
