@@ -2,7 +2,8 @@
 // (impedance, OSC, open- and closed-loop force, hybrid) and common.rs's finish (gravity compensation, the
 // finger PD, clamping), one invocation per world, reading the articulation kernel's per-world record (the
 // fingertip frame's pose, twist and geometric Jacobian, M, g: engine articulation/gpu.rs DynamicsLayout)
-// and writing the joint torques the articulation's step reads. task_space_gpu.rs documents the layout.
+// and writing the joint torques the articulation's step reads. task_space_gpu.rs documents the layout;
+// `Input` and `quat_mul` are in task_space_input.wgsl, prepended.
 
 const MAX_N: u32 = 9u;      // linalg.rs MAX_N: the widest arm
 const MAX_DOF: u32 = 16u;   // the engine's MAX_DOFS
@@ -32,17 +33,6 @@ struct TaskParams {
     mass_matrix: u32,
     gravity_torque: u32,
     flags: u32,
-}
-
-// A world's targets and measured wrench (ControllerInputGpu).
-struct Input {
-    target_pos: vec4<f32>,
-    target_quat: vec4<f32>,
-    target_force: vec4<f32>,
-    target_torque: vec4<f32>,
-    gripper_q: vec4<f32>,
-    measured_force: vec4<f32>,
-    measured_torque: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> params: TaskParams;
@@ -77,11 +67,6 @@ fn axis_angle_from_quat(q: vec4<f32>) -> vec3<f32> {
         return v * (2.0 / w);
     }
     return vec3<f32>(0.0);
-}
-
-// Hamilton product a b of (x, y, z, w) quaternions (glam's).
-fn quat_mul(a: vec4<f32>, b: vec4<f32>) -> vec4<f32> {
-    return vec4<f32>(a.w * b.xyz + b.w * a.xyz + cross(a.xyz, b.xyz), a.w * b.w - dot(a.xyz, b.xyz));
 }
 
 // The engine's dynamics.rs cholesky_factor on lmat (row-major n x n): L in the lower triangle, a pivot that

@@ -31,7 +31,10 @@ use crate::linalg::MAX_N;
 use crate::rotation::JacobianKind;
 use crate::Controller;
 
-pub const TASK_SPACE_WGSL: &str = include_str!("task_space.wgsl");
+/// The `Input` struct ([`ControllerInputGpu`]) and `quat_mul`, for kernels that write the controller's
+/// inputs (prepend it to their source).
+pub const CONTROLLER_INPUT_WGSL: &str = include_str!("task_space_input.wgsl");
+pub const TASK_SPACE_WGSL: &str = concat!(include_str!("task_space_input.wgsl"), include_str!("task_space.wgsl"));
 
 /// Worlds per workgroup (`@workgroup_size` of task_space.wgsl).
 pub const TASK_SPACE_WG: u32 = 64;
@@ -246,13 +249,7 @@ mod tests {
     /// The kernel parses and validates with naga (no GPU needed), and the check can fail.
     #[test]
     fn task_space_shader_validates_with_naga() {
-        let check = |src: &str| -> std::result::Result<(), String> {
-            let module = naga::front::wgsl::parse_str(src).map_err(|e| e.emit_to_string(src))?;
-            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-                .validate(&module)
-                .map(|_| ())
-                .map_err(|e| format!("{e:?}"))
-        };
+        let check = |src: &str| factory_engine::gpu::validate_wgsl(src, false);
         if let Err(e) = check(TASK_SPACE_WGSL) {
             panic!("task_space.wgsl:\n{e}");
         }

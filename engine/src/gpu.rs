@@ -367,6 +367,17 @@ impl GpuContext {
     }
 }
 
+/// Parses and validates WGSL `source` with naga, no GPU needed (every crate's shader tests), allowing
+/// subgroup operations or not (the portable kernels must not use them). The error is naga's report.
+pub fn validate_wgsl(source: &str, subgroups: bool) -> std::result::Result<(), String> {
+    let module = naga::front::wgsl::parse_str(source).map_err(|e| e.emit_to_string(source))?;
+    let caps = if subgroups { naga::valid::Capabilities::SUBGROUP } else { naga::valid::Capabilities::empty() };
+    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), caps)
+        .validate(&module)
+        .map(|_| ())
+        .map_err(|e| format!("{e:?}"))
+}
+
 /// Checks [`REQUIRED_LIMITS`] against `limits`, naming the first shortfall.
 pub fn check_limits(adapter: &str, limits: &wgpu::Limits) -> Result<()> {
     for (name, min, get) in REQUIRED_LIMITS {

@@ -12,8 +12,7 @@ pub(crate) fn validator(subgroups: bool) -> naga::valid::Validator {
 }
 
 pub(crate) fn validate(src: &str, subgroups: bool) -> Result<(), String> {
-    let module = naga::front::wgsl::parse_str(src).map_err(|e| e.emit_to_string(src))?;
-    validator(subgroups).validate(&module).map(|_| ()).map_err(|e| format!("{e:?}"))
+    crate::gpu::validate_wgsl(src, subgroups)
 }
 
 #[test]

@@ -1,7 +1,8 @@
 // FrankaNutBolt's actions to the controller's targets on the device: nut_bolt.rs `action_targets`, one
 // invocation per world, from the policy's actions and the articulation kernel's record of the fingertip
 // pose (engine articulation/gpu.rs DynamicsLayout: position at 0, rotation at 4), into the controller
-// kernel's inputs (controllers task_space.wgsl `Input`). action_gpu.rs documents the layout.
+// kernel's inputs (`Input`, with `quat_mul`, from the controllers' task_space_input.wgsl, prepended).
+// action_gpu.rs documents the layout.
 
 struct ActionParams {
     world_count: u32,
@@ -18,25 +19,10 @@ struct ActionParams {
     gripper_q: vec4<f32>,
 }
 
-struct Input {
-    target_pos: vec4<f32>,
-    target_quat: vec4<f32>,
-    target_force: vec4<f32>,
-    target_torque: vec4<f32>,
-    gripper_q: vec4<f32>,
-    measured_force: vec4<f32>,
-    measured_torque: vec4<f32>,
-}
-
 @group(0) @binding(0) var<uniform> params: ActionParams;
 @group(1) @binding(0) var<storage, read> world_dynamics: array<f32>;
 @group(1) @binding(1) var<storage, read> actions: array<f32>;
 @group(2) @binding(0) var<storage, read_write> inputs: array<Input>;
-
-// Hamilton product a b of (x, y, z, w) quaternions (glam's).
-fn quat_mul(a: vec4<f32>, b: vec4<f32>) -> vec4<f32> {
-    return vec4<f32>(a.w * b.xyz + b.w * a.xyz + cross(a.xyz, b.xyz), a.w * b.w - dot(a.xyz, b.xyz));
-}
 
 fn act(w: u32, k: u32) -> f32 {
     return clamp(actions[w * 12u + k], -1.0, 1.0);

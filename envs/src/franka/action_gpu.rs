@@ -21,7 +21,10 @@ use factory_engine::wgpu;
 use super::nut_bolt::FrankaNutBoltConfig;
 use crate::error::{EnvError, Result};
 
-pub const ACTION_WGSL: &str = include_str!("action.wgsl");
+/// The kernel's source: the controller's input struct, then action.wgsl.
+pub fn action_wgsl() -> String {
+    format!("{}{}", factory_controllers::task_space_gpu::CONTROLLER_INPUT_WGSL, include_str!("action.wgsl"))
+}
 
 /// Worlds per workgroup (`@workgroup_size` of action.wgsl).
 pub const ACTION_WG: u32 = 64;
@@ -88,7 +91,7 @@ impl ActionGpu {
         let ro = Binding::Storage { read_only: true };
         let layout =
             gpu.explicit_layout("action", &[&[Binding::Uniform], &[ro, ro], &[Binding::Storage { read_only: false }]]);
-        let pipeline = gpu.pipeline_on(&layout, "action", ACTION_WGSL, "screw_targets");
+        let pipeline = gpu.pipeline_on(&layout, "action", &action_wgsl(), "screw_targets");
         let groups = [
             gpu.bind_explicit(&layout, 0, &[&uniform], 0),
             gpu.bind_explicit(&layout, 1, &[&art.world_dynamics, &actions], 0),
@@ -135,17 +138,11 @@ mod tests {
     /// The kernel parses and validates with naga (no GPU needed), and the check can fail.
     #[test]
     fn action_shader_validates_with_naga() {
-        let check = |src: &str| -> std::result::Result<(), String> {
-            let module = naga::front::wgsl::parse_str(src).map_err(|e| e.emit_to_string(src))?;
-            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-                .validate(&module)
-                .map(|_| ())
-                .map_err(|e| format!("{e:?}"))
-        };
-        if let Err(e) = check(ACTION_WGSL) {
+        let check = |src: &str| factory_engine::gpu::validate_wgsl(src, false);
+        if let Err(e) = check(&action_wgsl()) {
             panic!("action.wgsl:\n{e}");
         }
-        assert!(check(&ACTION_WGSL.replace("inputs[w] = out;", "inputs[w] = q;")).is_err());
+        assert!(check(&action_wgsl().replace("inputs[w] = out;", "inputs[w] = q;")).is_err());
     }
 
     /// On 70 seeded Franka states (the articulation kernel's records) and actions in [-1.5, 1.5] (clipped),
