@@ -128,18 +128,23 @@ impl Targets {
 
     /// Checks the buffers' lengths against the batch they go with.
     pub fn check_shapes(&self, arm: &ArmBatch) -> Result<()> {
-        let w = arm.world_count;
+        self.check_shapes_for(arm.world_count, arm.dof.saturating_sub(arm.arm_dof))
+    }
+
+    /// [`check_shapes`](Self::check_shapes) for `world_count` worlds of `fingers` finger joints each.
+    pub fn check_shapes_for(&self, world_count: usize, fingers: usize) -> Result<()> {
+        let w = world_count;
         let lens = [
             ("Targets.ee_pos", self.ee_pos.len(), w),
             ("Targets.ee_quat", self.ee_quat.len(), w),
             ("Targets.ee_wrench", self.ee_wrench.len(), w),
-            ("Targets.gripper_q", self.gripper_q.len(), w * arm.dof.saturating_sub(arm.arm_dof)),
+            ("Targets.gripper_q", self.gripper_q.len(), w * fingers),
         ];
         check_lens(&lens)
     }
 }
 
-fn check_lens(lens: &[(&'static str, usize, usize)]) -> Result<()> {
+pub(crate) fn check_lens(lens: &[(&'static str, usize, usize)]) -> Result<()> {
     for &(field, len, expected) in lens {
         if len != expected {
             return Err(ControllerError::Shape { field, len, expected });

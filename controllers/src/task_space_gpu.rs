@@ -22,10 +22,10 @@
 
 use bytemuck::{Pod, Zeroable};
 use factory_engine::articulation::gpu::ArticulationGpu;
-use factory_engine::gpu::{Binding, ExplicitLayout, GpuContext};
+use factory_engine::gpu::{dispatch_compute, Binding, ExplicitLayout, GpuContext};
 use factory_engine::wgpu;
 
-use crate::batch::Targets;
+use crate::batch::{check_lens, Targets};
 use crate::error::{ControllerError, Result};
 use crate::linalg::MAX_N;
 use crate::rotation::JacobianKind;
@@ -210,19 +210,9 @@ impl TaskSpaceGpu {
     /// the next submission. Refuses shapes that are not one entry per world.
     pub fn write_inputs(&self, gpu: &GpuContext, targets: &Targets, measured: &[[f32; 6]]) -> Result<()> {
         let n = self.world_count as usize;
-        let shape = |field: &'static str, len: usize, expected: usize| {
-            if len == expected {
-                Ok(())
-            } else {
-                Err(ControllerError::Shape { field, len, expected })
-            }
-        };
-        shape("ee_pos", targets.ee_pos.len(), n)?;
-        shape("ee_quat", targets.ee_quat.len(), n)?;
-        shape("ee_wrench", targets.ee_wrench.len(), n)?;
-        shape("gripper_q", targets.gripper_q.len(), n * self.fingers)?;
+        targets.check_shapes_for(n, self.fingers)?;
         if !measured.is_empty() {
-            shape("measured ee_wrench", measured.len(), n)?;
+            check_lens(&[("measured ee_wrench", measured.len(), n)])?;
         }
         let inputs = ControllerInputGpu::from_targets(targets, measured, self.fingers);
         gpu.queue.write_buffer(&self.inputs, 0, bytemuck::cast_slice(&inputs));
@@ -234,11 +224,13 @@ impl TaskSpaceGpu {
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("task-space"), timestamp_writes: None });
-        pass.set_pipeline(&self.pipeline);
-        for (i, g) in self.groups.iter().enumerate() {
-            pass.set_bind_group(i as u32, g, &[]);
-        }
-        pass.dispatch_workgroups(self.world_count.div_ceil(TASK_SPACE_WG), 1, 1);
+        dispatch_compute(
+            &mut pass,
+            &self.pipeline,
+            self.groups.each_ref(),
+            self.world_count.div_ceil(TASK_SPACE_WG),
+            1,
+        );
     }
 }
 

@@ -367,6 +367,26 @@ impl GpuContext {
     }
 }
 
+/// Records `pipeline` with its three bind groups (model, state in, state out) over x by y workgroups.
+pub fn dispatch_compute(
+    pass: &mut wgpu::ComputePass,
+    pipeline: &wgpu::ComputePipeline,
+    groups: [&wgpu::BindGroup; 3],
+    x: u32,
+    y: u32,
+) {
+    bind_compute(pass, pipeline, groups);
+    pass.dispatch_workgroups(x, y, 1);
+}
+
+/// Sets `pipeline` and its three bind groups for the dispatch that follows.
+pub fn bind_compute(pass: &mut wgpu::ComputePass, pipeline: &wgpu::ComputePipeline, groups: [&wgpu::BindGroup; 3]) {
+    pass.set_pipeline(pipeline);
+    for (i, g) in groups.iter().enumerate() {
+        pass.set_bind_group(i as u32, *g, &[]);
+    }
+}
+
 /// Parses and validates WGSL `source` with naga, no GPU needed (every crate's shader tests), allowing
 /// subgroup operations or not (the portable kernels must not use them). The error is naga's report.
 pub fn validate_wgsl(source: &str, subgroups: bool) -> std::result::Result<(), String> {

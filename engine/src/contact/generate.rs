@@ -3,6 +3,7 @@
 use super::model::{FlatModel, JobGpu, PairGpu, ParamsGpu, PatchGpu, EMPTY_DEPTH};
 use super::reduce::{Candidate, Reducer};
 use super::ContactConfig;
+use crate::gpu::{bind_compute, dispatch_compute};
 use glam::{Vec3, Vec4};
 
 pub(crate) const COMMON_WGSL: &str = include_str!("common.wgsl");
@@ -109,26 +110,6 @@ pub(crate) fn compute_pipeline_with(
         compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
         cache: None,
     })
-}
-
-/// Records `pipeline` with its three bind groups (model, state in, state out) over x by y workgroups.
-pub(crate) fn dispatch_compute(
-    pass: &mut wgpu::ComputePass,
-    pipeline: &wgpu::ComputePipeline,
-    groups: [&wgpu::BindGroup; 3],
-    x: u32,
-    y: u32,
-) {
-    bind_compute(pass, pipeline, groups);
-    pass.dispatch_workgroups(x, y, 1);
-}
-
-/// Sets `pipeline` and its three bind groups for the dispatch that follows.
-fn bind_compute(pass: &mut wgpu::ComputePass, pipeline: &wgpu::ComputePipeline, groups: [&wgpu::BindGroup; 3]) {
-    pass.set_pipeline(pipeline);
-    for (i, g) in groups.iter().enumerate() {
-        pass.set_bind_group(i as u32, *g, &[]);
-    }
 }
 
 /// The generation pipelines: the first pass over every job, without eviction, and the retry pass over the

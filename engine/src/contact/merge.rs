@@ -1,9 +1,10 @@
 //! Patch merge kernel (merge.wgsl): combines a pair's per-job patches; CPU twin [`merge_cpu`].
 
-use super::generate::{compute_pipeline, dispatch_compute, shader_source_wg};
+use super::generate::{compute_pipeline, shader_source_wg};
 use super::model::{PairGpu, PatchGpu};
 use super::reduce::{Candidate, Reducer};
 use super::ContactConfig;
+use crate::gpu::dispatch_compute;
 use glam::Vec4;
 
 pub(crate) const MERGE_WGSL: &str = concat!(include_str!("merge.wgsl"), include_str!("merge_core.wgsl"));

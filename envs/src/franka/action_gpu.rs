@@ -15,7 +15,7 @@
 use bytemuck::{Pod, Zeroable};
 use factory_controllers::TaskSpaceGpu;
 use factory_engine::articulation::gpu::ArticulationGpu;
-use factory_engine::gpu::{Binding, ExplicitLayout, GpuContext};
+use factory_engine::gpu::{dispatch_compute, Binding, ExplicitLayout, GpuContext};
 use factory_engine::wgpu;
 
 use super::nut_bolt::FrankaNutBoltConfig;
@@ -117,11 +117,7 @@ impl ActionGpu {
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
         let mut pass =
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("action"), timestamp_writes: None });
-        pass.set_pipeline(&self.pipeline);
-        for (i, g) in self.groups.iter().enumerate() {
-            pass.set_bind_group(i as u32, g, &[]);
-        }
-        pass.dispatch_workgroups(self.world_count.div_ceil(ACTION_WG), 1, 1);
+        dispatch_compute(&mut pass, &self.pipeline, self.groups.each_ref(), self.world_count.div_ceil(ACTION_WG), 1);
     }
 }
 

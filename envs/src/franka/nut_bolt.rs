@@ -678,10 +678,6 @@ impl FrankaNutBolt {
         forces.push(("nut".into(), on_nut.iter().map(|x| x.length()).collect()));
         self.last_diagnostics = StepDiagnostics { joint_torque_norm: torque.collect(), contact_force_norms: forces };
     }
-
-    fn targets(&self, arm: &ArmBatch, action: &[f32]) -> Targets {
-        action_targets(&self.cfg, arm, action)
-    }
 }
 
 /// The controller's targets for every world's action (shape [world_count * 12], clipped to [-1, 1]): the
@@ -813,7 +809,7 @@ impl Env for FrankaNutBolt {
     fn step(&mut self, action: &[f32], out: &mut StepBuffers) {
         let n = self.spec.env_count;
         let arm = self.scene.arm();
-        let targets = self.targets(&arm, action);
+        let targets = action_targets(&self.cfg, &arm, action);
         let mut tau = vec![0.0f32; n * DOF];
         self.controller.compute(&arm, &targets, &mut tau);
         let mut control = ArticulationControl { joint_tau: tau, joint_target_q: self.scene.sim.joints.joint_q.clone() };
