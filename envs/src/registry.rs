@@ -68,8 +68,10 @@ pub fn build(cfg: &EnvConfig, env_count: usize, seed: u64) -> Result<Box<dyn Env
     })
 }
 
-/// Builds the device-resident implementation of the env a config describes on `device`, where it has one
-/// (`point_mass`); None where it has not (`franka_nut_bolt`: its coupled solve runs on the host).
+/// Builds the device-resident implementation of the env a config describes on `device`, where it has one:
+/// `point_mass` on any device; `franka_nut_bolt` on burn's wgpu runtime over the engine's device (built with
+/// the `wgpu` feature, and unless its config asks for `solve = "host"`). None elsewhere (the host env then
+/// runs: on a CPU learner it is the faster, DESIGN.md 1).
 pub fn build_device(
     cfg: &EnvConfig,
     env_count: usize,
@@ -78,8 +80,33 @@ pub fn build_device(
 ) -> Result<Option<Box<dyn DeviceEnv>>> {
     Ok(match cfg {
         EnvConfig::PointMass(c) => Some(Box::new(PointMassDevice::new(c, env_count, seed, device)?)),
-        EnvConfig::FrankaNutBolt(_) => None,
+        EnvConfig::FrankaNutBolt(c) => franka_device(c, env_count, seed, device)?,
     })
+}
+
+#[cfg(feature = "wgpu")]
+fn franka_device(
+    c: &FrankaNutBoltConfig,
+    env_count: usize,
+    seed: u64,
+    device: &burn::prelude::Device,
+) -> Result<Option<Box<dyn DeviceEnv>>> {
+    use crate::franka::device_env::{is_wgpu, FrankaNutBoltDevice};
+    use factory_engine::articulation::sim::CoupledSolve;
+    if c.solve == CoupledSolve::Host || !is_wgpu(device) {
+        return Ok(None);
+    }
+    Ok(Some(Box::new(FrankaNutBoltDevice::new(c, env_count, seed, device)?)))
+}
+
+#[cfg(not(feature = "wgpu"))]
+fn franka_device(
+    _: &FrankaNutBoltConfig,
+    _: usize,
+    _: u64,
+    _: &burn::prelude::Device,
+) -> Result<Option<Box<dyn DeviceEnv>>> {
+    Ok(None)
 }
 
 #[cfg(test)]

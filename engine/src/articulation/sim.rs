@@ -132,16 +132,21 @@ impl ArticulatedSim {
 
     /// Puts every link body where the joints put its link (after the joints were set from outside).
     pub fn sync_links(&mut self) {
+        for w in 0..self.world_count() {
+            self.sync_world_links(w);
+        }
+    }
+
+    /// [`sync_links`](Self::sync_links) for world `w` alone.
+    pub fn sync_world_links(&mut self, w: usize) {
         let nb = self.model.bodies.body_count();
         let dof = self.articulation.dof_count();
         let mut poses = vec![(Vec3::ZERO, Quat::IDENTITY); self.articulation.link_count()];
-        for w in 0..self.world_count() {
-            forward_kinematics(&self.articulation, &self.joints.joint_q[w * dof..(w + 1) * dof], &mut poses);
-            for i in 0..nb {
-                if let Some(l) = self.model.bodies.link(i) {
-                    let (p, q) = poses[l as usize];
-                    self.state.body_q[w * nb + i] = TransformGpu::new(p, q);
-                }
+        forward_kinematics(&self.articulation, &self.joints.joint_q[w * dof..(w + 1) * dof], &mut poses);
+        for i in 0..nb {
+            if let Some(l) = self.model.bodies.link(i) {
+                let (p, q) = poses[l as usize];
+                self.state.body_q[w * nb + i] = TransformGpu::new(p, q);
             }
         }
     }
@@ -162,6 +167,19 @@ impl ArticulatedSim {
             self.use_device_solver(gpu)?;
         }
         Ok(())
+    }
+
+    /// The device solve, once built: its buffers are the state while a caller steps the worlds on the device
+    /// without this type's per-frame upload and readback (an env's resident step: the contact pipeline's
+    /// `body_q`, the solver's `body_qd` and the joints in its `scratch`); `state` and `joints` here are then
+    /// stale until read back.
+    pub fn device_solver(&self) -> Option<&GpuArticulatedSolver> {
+        self.device.as_ref()
+    }
+
+    /// [`device_solver`](Self::device_solver), mutable (to set the control it holds).
+    pub fn device_solver_mut(&mut self) -> Option<&mut GpuArticulatedSolver> {
+        self.device.as_mut()
     }
 
     /// Whether the coupled solve runs on the device.

@@ -348,6 +348,12 @@ impl GpuArticulatedSolver {
         })
     }
 
+    /// Where the joints sit in `scratch` (and the link slots): for kernels that read or write them in place
+    /// (an env's resets, a hand-over to [`crate::articulation::gpu::ArticulationGpu`]).
+    pub fn coupling(&self) -> &CouplingGpu {
+        &self.coupling
+    }
+
     fn joint_bytes(&self) -> (u64, u64) {
         (self.coupling.joint_base as u64 * 16, self.coupling.joint_plane as u64 * 16)
     }

@@ -2,5 +2,8 @@
 //! plugins ([`nut_bolt`]; today the Screw task).
 
 pub mod action_gpu;
+#[cfg(feature = "wgpu")]
+pub mod device_env;
 pub mod nut_bolt;
 pub mod scene;
+pub mod screw_step;

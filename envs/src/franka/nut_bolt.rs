@@ -364,6 +364,8 @@ pub struct FrankaNutBolt {
     scene: NutBoltScene,
     controller: Box<dyn Controller>,
     task: Box<dyn NutBoltTask>,
+    /// The Screw task's geometry (the device step's copy of `task`).
+    screw: Screw,
     /// The nut's centre of mass in its frame [m].
     com_local: Vec3,
     /// Joint positions an unrandomised episode starts from (Factory's Screw pose, fingertip put on the nut by
@@ -476,15 +478,16 @@ impl FrankaNutBolt {
         let reset_q = inverse_kinematics(&scene, &q, Vec3::new(0.0, 0.0, head + start_z + cfg.grasp_height), down);
         let com_local = scene.nb.nut.mass_properties.com;
         // The task registry: one entry per `task` name.
+        let screw = Screw {
+            target: com_local,
+            pitch: scene.nb.pitch,
+            nut_height: nut_h,
+            bolt_diameter: scene.nb.spec.nominal_diameter as f32,
+            bolt_top: head + shank,
+            far_error: cfg.far_error,
+        };
         let task: Box<dyn NutBoltTask> = match cfg.task {
-            TaskName::Screw => Box::new(Screw {
-                target: com_local,
-                pitch: scene.nb.pitch,
-                nut_height: nut_h,
-                bolt_diameter: scene.nb.spec.nominal_diameter as f32,
-                bolt_top: head + shank,
-                far_error: cfg.far_error,
-            }),
+            TaskName::Screw => Box::new(screw.clone()),
         };
         let nut = scene.nut as u32;
         let pad_pairs = scene
@@ -551,6 +554,7 @@ impl FrankaNutBolt {
             scene,
             controller,
             task,
+            screw,
             com_local,
             reset_q,
             reset_nut,
@@ -626,8 +630,29 @@ impl FrankaNutBolt {
         }
     }
 
-    /// Resets world `w` to a new episode's start, drawing the randomisation.
-    fn reset_world(&mut self, w: usize) {
+    /// The config.
+    pub fn config(&self) -> &FrankaNutBoltConfig {
+        &self.cfg
+    }
+
+    /// The controller.
+    pub fn controller(&self) -> &dyn Controller {
+        self.controller.as_ref()
+    }
+
+    /// The Screw task's geometry.
+    pub fn screw(&self) -> &Screw {
+        &self.screw
+    }
+
+    /// The nut's centre of mass in its frame [m].
+    pub fn nut_com_local(&self) -> Vec3 {
+        self.com_local
+    }
+
+    /// Resets world `w` to a new episode's start, drawing the randomisation (the host state; the link bodies
+    /// follow at the next [`ArticulatedSim::sync_links`](factory_engine::articulation::sim::ArticulatedSim::sync_links)).
+    pub fn reset_world(&mut self, w: usize) {
         let r = self.cfg.randomize.clone();
         let mut draw = |[lo, hi]: [f32; 2]| if hi > lo { lo + (hi - lo) * self.rng.unit() } else { lo };
         let angle = draw(r.hand_angle_deg).to_radians();
