@@ -92,6 +92,52 @@ fn the_device_step_follows_the_host_env() {
     assert!(later_pos < 1e-2 && later_vel < 2.0 && worst_reward < 1e-2, "device and host drift apart");
 }
 
+/// With Table III's hand angle drawn, the device's resets take the bank's starts (the env's own draws): after
+/// each reset (episodes of one step) the nuts sit at many distinct angles within [-90, 90] degrees, each at the
+/// height the thread gives that angle (one pitch per turn), and the fingertip turned with the nut.
+#[test]
+fn device_resets_draw_the_bank_of_randomised_starts() {
+    use factory_envs::franka::nut_bolt::ScrewRandomization;
+    let gpu = GpuContext::global().unwrap();
+    let n = 8;
+    let randomize = ScrewRandomization { hand_angle_deg: [-90.0, 90.0], ..Default::default() };
+    let cfg =
+        FrankaNutBoltConfig { solve: CoupledSolve::Device, max_episode_steps: 1, randomize, ..Default::default() };
+    let mut env = FrankaNutBolt::new(&cfg, n, 0).unwrap();
+    let step = ScrewStepGpu::new(gpu, &mut env, 32).unwrap();
+    assert_eq!(step.bank_count, 32);
+    step.reset(gpu, &mut env).unwrap();
+    let pitch = env.screw().pitch;
+    let mut b = StepBuffers::new(env.spec());
+    let d = env.spec().observation_dim();
+    let yaw = |q: &[f32]| glam::Quat::from_slice(q).to_euler(glam::EulerRot::ZYX).0;
+    let (mut yaws, mut offsets) = (Vec::new(), Vec::new());
+    for _ in 0..4 {
+        step.action.write_actions(gpu, &vec![0.0; n * 12]).unwrap();
+        step.step(gpu, &env.scene().sim);
+        step.read(gpu, &mut b);
+        assert!(b.truncated.iter().zip(&b.terminated).all(|(t, e)| t + e == 1.0), "every episode ends");
+        for w in 0..n {
+            let o = &b.observation[w * d..(w + 1) * d];
+            let (nut_yaw, tip_yaw) = (yaw(&o[16..20]), yaw(&o[3..7]));
+            yaws.push(nut_yaw);
+            // On the helix: the height less pitch x turns is the same for every start.
+            offsets.push(o[15] - pitch * nut_yaw / std::f32::consts::TAU);
+            let turn = (tip_yaw - nut_yaw).rem_euclid(std::f32::consts::FRAC_PI_2);
+            let turn = turn.min(std::f32::consts::FRAC_PI_2 - turn);
+            assert!(turn < 1e-3, "world {w}: the fingertip is {turn} rad off the nut's flats");
+        }
+    }
+    let mut distinct: Vec<i32> = yaws.iter().map(|y| (y * 1e3).round() as i32).collect();
+    distinct.sort();
+    distinct.dedup();
+    let spread = offsets.iter().fold(0.0f32, |m, x| m.max((x - offsets[0]).abs()));
+    eprintln!("{} resets: {} distinct nut angles, helix offsets within {spread:.2e} m", yaws.len(), distinct.len());
+    assert!(yaws.iter().all(|y| y.abs() <= std::f32::consts::FRAC_PI_2 + 1e-4), "angles beyond 90 degrees: {yaws:?}");
+    assert!(distinct.len() >= 12, "only {} distinct starts in {} resets", distinct.len(), yaws.len());
+    assert!(spread < 1e-5, "a start off the thread's helix by {spread} m");
+}
+
 /// burn's wgpu runtime on the engine's device and queue (as factory-rl's `engine_wgpu_device`), once.
 #[cfg(feature = "wgpu")]
 fn engine_burn_device() -> burn::prelude::Device {
