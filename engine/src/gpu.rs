@@ -337,6 +337,7 @@ impl GpuContext {
     /// Like [`read_buffer`](Self::read_buffer), but only `bytes` bytes (rounded up to 4) from byte `offset`
     /// (a multiple of 4).
     pub fn read_buffer_range<T: Pod>(&self, buffer: &wgpu::Buffer, offset: u64, bytes: u64) -> Vec<T> {
+        HOST_SYNCS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let size = bytes.next_multiple_of(4).min(buffer.size().saturating_sub(offset));
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
@@ -363,8 +364,19 @@ impl GpuContext {
 
     /// Blocks until all submitted work is done.
     pub fn wait(&self) {
+        HOST_SYNCS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.device.poll(wgpu::PollType::wait_indefinitely()).expect("device lost");
     }
+}
+
+/// Readbacks and waits for the device, every [`GpuContext`] together.
+static HOST_SYNCS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// How many times the host has read a buffer back ([`GpuContext::read_buffer`] and its variants) or waited for
+/// the device ([`GpuContext::wait`]) in this process: a test of a device-resident loop counts them before and
+/// after (the count is process-wide, so such a test runs alone in its binary or tolerates others).
+pub fn host_syncs() -> u64 {
+    HOST_SYNCS.load(std::sync::atomic::Ordering::Relaxed)
 }
 
 /// Records `pipeline` with its three bind groups (model, state in, state out) over x by y workgroups.

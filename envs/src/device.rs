@@ -30,6 +30,10 @@ pub struct DeviceStep {
     pub truncated: Tensor<1>,
     /// 1.0 where the episode ended in success this step, else 0.0; [env_count].
     pub success: Tensor<1>,
+    /// Where an episode terminated without success this step, 1 + the index of its cause in
+    /// [`DeviceEnv::failure_causes`], else 0 (whole numbers in f32); [env_count]. None for an env that names
+    /// no causes.
+    pub failure: Option<Tensor<1>>,
 }
 
 /// A batch of `env_count` worlds stepped together on a burn device.
@@ -43,6 +47,12 @@ pub trait DeviceEnv: Send {
     /// Applies `action` (shape [env_count, action_dim], clipped to [-1, 1]) for one control step, resets the
     /// worlds whose episode ended and returns the step's results (see the module docs).
     fn step(&mut self, action: Tensor<2>) -> DeviceStep;
+
+    /// Hook: the names of the causes [`DeviceStep::failure`] numbers (as the host env's
+    /// `StepBuffers::failure`: `slipped`, `fallen`, ...); none by default.
+    fn failure_causes(&self) -> &'static [&'static str] {
+        &[]
+    }
 
     /// Hook: the env's whole state as bytes (read back from the device: for checkpoints, not per step), so a
     /// resumed run continues exactly; `None` (the default) when the env cannot.

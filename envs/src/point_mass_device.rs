@@ -88,6 +88,7 @@ impl DeviceEnv for PointMassDevice {
             terminated: zeros.clone(),
             truncated: zeros.clone(),
             success: zeros,
+            failure: None,
         }
     }
 
@@ -117,6 +118,7 @@ impl DeviceEnv for PointMassDevice {
             terminated: reached.clone(),
             truncated: timed_out,
             success: reached,
+            failure: None,
         }
     }
 

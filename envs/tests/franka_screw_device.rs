@@ -9,7 +9,7 @@ use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
 
 /// From the same reset and with the same actions (seeded, in [-1.2, 1.2], so clipped too), the device step
 /// gives the host env's observations, rewards and flags, through two time limits (episodes of 8 steps,
-/// reset in place on the device) and the previous-action observation. The two differ where the
+/// reset in place on the device), the pads' forces and the previous action observed. The two differ where the
 /// controller and the fingertip's kinematics run (device kernels vs host code: float rounding) and in
 /// nothing else: both step the same contact pipeline and coupled solve on the device.
 ///
@@ -28,6 +28,7 @@ fn the_device_step_follows_the_host_env() {
     let cfg = FrankaNutBoltConfig {
         solve: CoupledSolve::Device,
         max_episode_steps: episode,
+        observe_finger_force: true,
         observe_previous_action: true,
         ..Default::default()
     };
@@ -41,13 +42,14 @@ fn the_device_step_follows_the_host_env() {
     let mut db = StepBuffers::new(dev.spec());
     step.read(gpu, &mut db);
     let d = host.spec().observation_dim();
-    assert_eq!(d, 38);
+    assert_eq!(d, 44);
     let worst = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
     let w0 = worst(&hb.observation, &db.observation);
     eprintln!("reset: observations within {w0:.2e}");
     assert!(w0 < 1e-6, "reset observations differ by {w0}");
     let mut rng = SplitMix64(3);
     let (mut first_pos, mut first_vel, mut later_pos, mut later_vel, mut worst_reward) = (0f32, 0f32, 0f32, 0f32, 0f32);
+    let (mut first_force, mut squeeze) = (0f32, 0f32);
     let mut ended = 0;
     for t in 0..3 * episode as usize - 1 {
         let a: Vec<f32> = (0..n * 12).map(|_| 2.4 * rng.unit() - 1.2).collect();
@@ -71,11 +73,13 @@ fn the_device_step_follows_the_host_env() {
                 assert!(gap < 1e-6, "step {t} world {w}: the next episode's first observations differ by {gap}");
                 continue;
             }
-            // Poses (fingertip, nut) and the previous action; velocities (fingertip, nut).
-            let pos = worst(&h[0..7], &g[0..7]).max(worst(&h[13..20], &g[13..20])).max(worst(&h[26..], &g[26..]));
+            // Poses (fingertip, nut) and the previous action; velocities (fingertip, nut); the pads' forces.
+            let pos = worst(&h[0..7], &g[0..7]).max(worst(&h[13..20], &g[13..20])).max(worst(&h[32..], &g[32..]));
             let vel = worst(&h[7..13], &g[7..13]).max(worst(&h[20..26], &g[20..26]));
             if t % episode as usize == 0 {
                 (first_pos, first_vel) = (first_pos.max(pos), first_vel.max(vel));
+                first_force = first_force.max(worst(&h[26..32], &g[26..32]));
+                squeeze = squeeze.max(glam::Vec3::from_slice(&h[26..29]).length());
             } else {
                 (later_pos, later_vel) = (later_pos.max(pos), later_vel.max(vel));
             }
@@ -83,11 +87,12 @@ fn the_device_step_follows_the_host_env() {
     }
     eprintln!(
         "{n} worlds, {ended} episodes ended; episodes' first steps: poses within {first_pos:.2e}, velocities \
-         {first_vel:.2e}; later steps: poses {later_pos:.2e}, velocities {later_vel:.2e}; rewards within \
-         {worst_reward:.2e}"
+         {first_vel:.2e}, pad forces {first_force:.2e} N (of up to {squeeze:.2} N); later steps: poses \
+         {later_pos:.2e}, velocities {later_vel:.2e}; rewards within {worst_reward:.2e}"
     );
     assert_eq!(ended, 2 * n, "the time limits reset every world twice");
     assert!(first_pos < 5e-6 && first_vel < 1e-3, "the first steps differ beyond rounding");
+    assert!(squeeze > 1.0 && first_force < 1e-3 * squeeze, "pad forces {first_force} N apart (squeeze {squeeze} N)");
     // A nut lost in one and not the other would be centimetres and the flags would differ.
     assert!(later_pos < 1e-2 && later_vel < 2.0 && worst_reward < 1e-2, "device and host drift apart");
 }
@@ -136,6 +141,52 @@ fn device_resets_draw_the_bank_of_randomised_starts() {
     assert!(yaws.iter().all(|y| y.abs() <= std::f32::consts::FRAC_PI_2 + 1e-4), "angles beyond 90 degrees: {yaws:?}");
     assert!(distinct.len() >= 12, "only {} distinct starts in {} resets", distinct.len(), yaws.len());
     assert!(spread < 1e-5, "a start off the thread's helix by {spread} m");
+}
+
+/// A saved device state continues bitwise in a fresh env of the same config and seed (bodies, the solve's
+/// warm-start rows and joints, the episodes' counters; through a time limit after the load), and a state of
+/// the wrong size is refused naming the field.
+#[test]
+fn a_saved_device_state_continues_bitwise() {
+    let gpu = GpuContext::global().unwrap();
+    let n = 3;
+    let cfg = FrankaNutBoltConfig {
+        solve: CoupledSolve::Device,
+        max_episode_steps: 6,
+        observe_previous_action: true,
+        ..Default::default()
+    };
+    let mut rng = SplitMix64(21);
+    let actions: Vec<Vec<f32>> = (0..9).map(|_| (0..n * 12).map(|_| 2.0 * rng.unit() - 1.0).collect()).collect();
+    let run = |env: &FrankaNutBolt, step: &ScrewStepGpu, actions: &[Vec<f32>]| {
+        let mut b = StepBuffers::new(env.spec());
+        let mut out = Vec::new();
+        for a in actions {
+            step.action.write_actions(gpu, a).unwrap();
+            step.step(gpu, &env.scene().sim);
+            step.read(gpu, &mut b);
+            out.push((b.observation.clone(), b.reward.clone(), b.terminated.clone(), b.truncated.clone()));
+        }
+        out
+    };
+    let mut a_env = FrankaNutBolt::new(&cfg, n, 4).unwrap();
+    let a_step = ScrewStepGpu::new(gpu, &mut a_env, 8).unwrap();
+    a_step.reset(gpu, &mut a_env).unwrap();
+    run(&a_env, &a_step, &actions[..4]);
+    let saved = a_step.save(gpu, &a_env.scene().sim);
+    let straight = run(&a_env, &a_step, &actions[4..]);
+    let mut b_env = FrankaNutBolt::new(&cfg, n, 4).unwrap();
+    let b_step = ScrewStepGpu::new(gpu, &mut b_env, 8).unwrap();
+    b_step.reset(gpu, &mut b_env).unwrap();
+    let e = b_step.load(gpu, &b_env.scene().sim, &saved[..saved.len() - 4]).unwrap_err().to_string();
+    assert!(e.contains("state"), "{e}");
+    b_step.load(gpu, &b_env.scene().sim, &saved).unwrap();
+    let resumed = run(&b_env, &b_step, &actions[4..]);
+    assert!(straight.iter().any(|s| s.3.contains(&1.0)), "a time limit after the load");
+    for (t, (s, r)) in straight.iter().zip(&resumed).enumerate() {
+        assert!(s == r, "step {} after the load differs", t + 1);
+    }
+    eprintln!("{} bytes of state; {} steps after the load equal bitwise", saved.len(), straight.len());
 }
 
 /// burn's wgpu runtime on the engine's device and queue (as factory-rl's `engine_wgpu_device`), once.

@@ -37,7 +37,8 @@ pub enum DeviceChoice {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RolloutChoice {
-    /// The env's device implementation where it has one (`point_mass`), else the host env.
+    /// The env's device implementation where it has one for the learner's device (`point_mass` on any,
+    /// `franka_nut_bolt` on a wgpu learner built with the `wgpu` feature), else the host env.
     Auto,
     /// The host env: observations uploaded and actions read back every step.
     Host,

@@ -95,17 +95,25 @@ pub struct DeviceEpisodes {
     /// Steps of each world's running episode, [N].
     pub running_length: Tensor<1>,
     /// Since the last [`take`](Self::take): [episodes ended, succeeded, sum of their returns, sum of their
-    /// lengths, truncated], [5].
+    /// lengths, truncated, then one count per failure cause the env names], [5 + causes].
     pub totals: Tensor<1>,
+    /// Failure causes the env names ([`DeviceEnv::failure_causes`]).
+    causes: usize,
 }
 
 impl DeviceEpisodes {
-    /// For `env_count` worlds on `device`.
+    /// For `env_count` worlds on `device`, an env that names no failure causes.
     pub fn new(env_count: usize, device: &Device) -> Self {
+        Self::with_causes(env_count, 0, device)
+    }
+
+    /// For `env_count` worlds on `device`, counting each of `causes` failure causes apart.
+    pub fn with_causes(env_count: usize, causes: usize, device: &Device) -> Self {
         Self {
             running_return: Tensor::zeros([env_count], device),
             running_length: Tensor::zeros([env_count], device),
-            totals: Tensor::zeros([5], device),
+            totals: Tensor::zeros([5 + causes], device),
+            causes,
         }
     }
 
@@ -114,17 +122,20 @@ impl DeviceEpisodes {
         let ret = self.running_return.clone() + out.reward.clone();
         let len = self.running_length.clone().add_scalar(1.0);
         let done = (out.terminated.clone() + out.truncated.clone()).clamp(0.0, 1.0);
-        let ended = Tensor::cat(
-            vec![
-                done.clone().sum(),
-                (out.success.clone() * done.clone()).sum(),
-                (ret.clone() * done.clone()).sum(),
-                (len.clone() * done.clone()).sum(),
-                out.truncated.clone().sum(),
-            ],
-            0,
-        );
-        self.totals = self.totals.clone() + ended;
+        let mut counts = vec![
+            done.clone().sum(),
+            (out.success.clone() * done.clone()).sum(),
+            (ret.clone() * done.clone()).sum(),
+            (len.clone() * done.clone()).sum(),
+            out.truncated.clone().sum(),
+        ];
+        for c in 1..=self.causes {
+            counts.push(match &out.failure {
+                Some(f) => f.clone().equal_elem(c as f32).float().sum(),
+                None => Tensor::zeros([1], &done.device()),
+            });
+        }
+        self.totals = self.totals.clone() + Tensor::cat(counts, 0);
         let keep = done.neg().add_scalar(1.0);
         self.running_return = ret * keep.clone();
         self.running_length = len * keep;
@@ -133,19 +144,24 @@ impl DeviceEpisodes {
     /// The totals since the last call (still on the device), and zeroes them.
     pub fn take(&mut self) -> Tensor<1> {
         let device = self.totals.device();
-        std::mem::replace(&mut self.totals, Tensor::zeros([5], &device))
+        std::mem::replace(&mut self.totals, Tensor::zeros([5 + self.causes], &device))
     }
 
-    /// How the episodes of read-back [`totals`](Self::totals) ended: `success`, `time_limit` and, for the
-    /// rest, `failure` (a device env names no causes).
-    pub fn ended_by(totals: &[f32]) -> EndCauses {
+    /// How the episodes of read-back [`totals`](Self::totals) ended: `success`, `time_limit`, each of the env's
+    /// named `causes` (in the order of [`DeviceEnv::failure_causes`]) and, for any rest, `failure`.
+    pub fn ended_by(totals: &[f32], causes: &[&str]) -> EndCauses {
         let (ended, succeeded, truncated) =
             (totals[0].round() as usize, totals[1].round() as usize, totals[4].round() as usize);
-        let mut causes = EndCauses::default();
-        causes.add("success", succeeded);
-        causes.add("time_limit", truncated);
-        causes.add("failure", ended.saturating_sub(succeeded + truncated));
-        causes
+        let mut out = EndCauses::default();
+        out.add("success", succeeded);
+        out.add("time_limit", truncated);
+        let mut named = 0;
+        for (name, &count) in causes.iter().zip(totals.get(5..).unwrap_or(&[])) {
+            out.add(name, count.round() as usize);
+            named += count.round() as usize;
+        }
+        out.add("failure", ended.saturating_sub(succeeded + truncated + named));
+        out
     }
 }
 

@@ -275,14 +275,18 @@ impl Trainer {
                 if let Some(steps) = staggered_steps(env.spec(), cfg.train.stagger_first_episodes, seed)? {
                     env.set_episode_steps(&steps).map_err(stagger_error)?;
                 }
-                EnvRun::Device { env, obs, episodes: DeviceEpisodes::new(n, &device) }
+                let episodes = DeviceEpisodes::with_causes(n, env.failure_causes().len(), &device);
+                EnvRun::Device { env, obs, episodes }
             }
             None if cfg.train.rollout == RolloutChoice::Device => {
                 return Err(RlError::InvalidValue {
                     field: "train.rollout".into(),
                     reason: format!(
-                        "\"device\": env `{}` has no device implementation; valid for it: \"auto\", \"host\"",
-                        cfg.env.name()
+                        "\"device\": env `{}` has no device implementation for this learner (ppo.device = {:?}); valid for it: \
+                         \"auto\", \"host\" (franka_nut_bolt runs on the device with ppo.device = \"wgpu\", built \
+                         with factory-rl's `wgpu` feature, and solve other than \"host\")",
+                        cfg.env.name(),
+                        cfg.ppo.device
                     ),
                 })
             }
@@ -353,7 +357,7 @@ impl Trainer {
                 let t1 = Instant::now();
                 // The tallies come back with the update's summary (`DeviceEpisodes::totals`).
                 let (stats, t) = self.ppo.update_with(rollout, Some(episodes.take()));
-                let ended_by = DeviceEpisodes::ended_by(&t);
+                let ended_by = DeviceEpisodes::ended_by(&t, env.failure_causes());
                 let succ = ended_by.0.get("success").copied().unwrap_or(0);
                 (t1, stats, ended_by.total(), succ, t[2] as f64, ended_by)
             }

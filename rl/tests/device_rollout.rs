@@ -98,3 +98,29 @@ fn the_device_path_learns_the_point_mass() {
     assert!(ended.0 > 0.0);
     assert!(report.success_rate > 0.95, "evaluation success {:.3} <= 0.95", report.success_rate);
 }
+
+/// A device env's failure causes are counted apart: one step of 5 worlds (a success, a time limit, two
+/// `slipped`, one `far`) tallies each under its name, nothing under the generic `failure`.
+#[test]
+fn device_failure_causes_are_tallied_by_name() {
+    let device = Device::flex();
+    let t = |v: [f32; 5]| burn::tensor::Tensor::<1>::from_floats(v, &device);
+    let mut episodes = DeviceEpisodes::with_causes(5, 2, &device);
+    let step = factory_envs::DeviceStep {
+        observation: burn::tensor::Tensor::zeros([5, 1], &device),
+        reward: t([1.0; 5]),
+        terminated: t([1.0, 0.0, 1.0, 1.0, 1.0]),
+        truncated: t([0.0, 1.0, 0.0, 0.0, 0.0]),
+        success: t([1.0, 0.0, 0.0, 0.0, 0.0]),
+        // 1 + the cause's index in ["far", "slipped"].
+        failure: Some(t([0.0, 0.0, 2.0, 2.0, 1.0])),
+    };
+    episodes.record(&step);
+    let totals = episodes.take().into_data().try_into_vec::<f32>().unwrap();
+    let ended_by = DeviceEpisodes::ended_by(&totals, &["far", "slipped"]);
+    let want: std::collections::BTreeMap<String, usize> =
+        [("success", 1), ("time_limit", 1), ("slipped", 2), ("far", 1)].map(|(k, v)| (k.to_string(), v)).into();
+    assert_eq!(ended_by.0, want, "{totals:?}");
+    // Without names the same step's failures fall under `failure`.
+    assert_eq!(DeviceEpisodes::ended_by(&totals[..5], &[]).0.get("failure"), Some(&3));
+}

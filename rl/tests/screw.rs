@@ -51,8 +51,9 @@ fn screw_smoke_and_exact_resume() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// The Franka env has no device implementation yet (its coupled solve runs on the host): asking for a
-/// device rollout is refused naming the field and the valid choices, before any world is built.
+/// With a flex (CPU) learner the Franka env has no device implementation (it needs burn's wgpu runtime on the
+/// engine's device, rl/tests/franka_device.rs): asking for a device rollout is refused naming the field
+/// and the valid choices, before any world is built; `auto` keeps the env on the host.
 #[test]
 fn a_device_rollout_of_the_franka_env_is_refused_by_name() {
     let e = Trainer::new(quick(&["train.rollout=\"device\""]), Device::flex()).err().unwrap().to_string();

@@ -27,6 +27,7 @@ const MERGE_WGSL: &str = concat!(include_str!("merge.wgsl"), include_str!("../co
 const SOLVE_WGSL: &str = concat!(
     include_str!("solve.wgsl"),
     include_str!("../solver/solver_core.wgsl"),
+    include_str!("../solver/orthonormal.wgsl"),
     include_str!("../contact/sdf_sample.wgsl"),
     include_str!("../sdf/thread.wgsl"),
     include_str!("../sdf/revolved.wgsl")

@@ -53,6 +53,7 @@ pub(crate) const ARTICULATED_WGSL: &str = concat!(
     include_str!("articulated.wgsl"),
     include_str!("solver_sweep.wgsl"),
     include_str!("solver_core.wgsl"),
+    include_str!("orthonormal.wgsl"),
     include_str!("../articulation/articulation_core.wgsl"),
     include_str!("../contact/sdf_sample.wgsl"),
     include_str!("../sdf/thread.wgsl"),
@@ -84,6 +85,20 @@ pub struct CouplingGpu {
     /// The substep the dispatch takes (0-based; a frame is one dispatch per substep).
     pub substep: u32,
     pub _pad: [u32; 2],
+}
+
+/// Where [`GpuArticulatedSolver::scratch`] keeps the contact rows (vec4 units): world w's rows of pair p start at
+/// vec4 `rows_base + (w * rows_per_world + p * rows_per_pair) * row_vec4`. In a row, vec4 0's w is its pair
+/// (u32 bits), vec4 1's xyz its impulses [N s] along the normal n, t1 = n's `any_orthonormal_vector` and n x
+/// t1 over the last substep, vec4 2's xyz n (zero for an empty row), vec4 3's w the frame that built it
+/// (u32 bits); the world's status (vec4 w of `scratch`) holds the last frame in its w. A pair's slots hold
+/// rows of older frames where it had more patches then.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RowsLayout {
+    pub rows_base: u32,
+    pub rows_per_world: u32,
+    pub rows_per_pair: u32,
+    pub row_vec4: u32,
 }
 
 /// The summed impulse (world frame) of pair `pair`'s rows of frame `frame` among one pair's row slots (slots
@@ -346,6 +361,17 @@ impl GpuArticulatedSolver {
             max_patches: contacts.cfg.max_patches,
             coupling,
         })
+    }
+
+    /// Where the contact rows sit in `scratch`, for kernels that read their impulses in place (an env's
+    /// finger-force observation; [`pair_impulse`](Self::pair_impulse) is the host's reading).
+    pub fn rows_layout(&self) -> RowsLayout {
+        RowsLayout {
+            rows_base: (rows_offset(self.world_count, self.body_count) / 16) as u32,
+            rows_per_world: self.max_rows,
+            rows_per_pair: self.max_patches * 4,
+            row_vec4: ROW_VEC4 as u32,
+        }
     }
 
     /// Where the joints sit in `scratch` (and the link slots): for kernels that read or write them in place

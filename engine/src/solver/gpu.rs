@@ -12,6 +12,7 @@ pub(crate) const SOLVER_WGSL: &str = concat!(
     include_str!("solver.wgsl"),
     include_str!("solver_sweep.wgsl"),
     include_str!("solver_core.wgsl"),
+    include_str!("orthonormal.wgsl"),
     include_str!("../contact/sdf_sample.wgsl"),
     include_str!("../sdf/thread.wgsl"),
     include_str!("../sdf/revolved.wgsl")

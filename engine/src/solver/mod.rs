@@ -44,6 +44,10 @@
 pub mod articulated;
 pub mod gpu;
 
+/// WGSL: `any_orthonormal(n)`, the contact rows' first tangent (glam's `any_orthonormal_vector`), for kernels
+/// outside the engine that read the rows' impulses ([`articulated::RowsLayout`]).
+pub const ANY_ORTHONORMAL_WGSL: &str = include_str!("orthonormal.wgsl");
+
 use crate::articulation::{dynamics, ArticulationControl, ArticulationModel, ArticulationState};
 use crate::contact::generate::{sdf_sample_cpu, Xf};
 use crate::contact::model::{FlatModel, NO_BODY};

@@ -87,13 +87,7 @@ fn quat_to_mat3(q: vec4<f32>) -> mat3x3<f32> {
     );
 }
 
-// The same orthonormal choice as glam's Vec3::any_orthonormal_vector (Duff et al. 2017).
-fn any_orthonormal(n: vec3<f32>) -> vec3<f32> {
-    let sign = select(-1.0, 1.0, n.z >= 0.0);
-    let a = -1.0 / (sign + n.z);
-    let b = n.x * n.y * a;
-    return vec3<f32>(b, sign + n.y * n.y * a, -n.y);
-}
+// any_orthonormal: orthonormal.wgsl (included beside this file).
 
 // A body's pose, for building rows and sampling the SDF at them.
 struct BodyView {

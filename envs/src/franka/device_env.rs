@@ -20,7 +20,7 @@ use factory_engine::gpu::GpuContext;
 use factory_engine::wgpu;
 
 use super::nut_bolt::{FrankaNutBolt, FrankaNutBoltConfig};
-use super::screw_step::ScrewStepGpu;
+use super::screw_step::{ScrewStepGpu, CAUSES};
 use crate::device::{DeviceEnv, DeviceStep};
 use crate::env::{Env, EnvSpec};
 use crate::error::{EnvError, Result};
@@ -99,7 +99,8 @@ impl FrankaNutBoltDevice {
         let n = self.spec.env_count;
         let d = self.spec.observation_dim();
         let observation = Tensor::<2>::empty([n, d], &self.device);
-        let planes: Vec<Tensor<1>> = (0..4).map(|_| Tensor::<1>::empty([n], &self.device)).collect();
+        // step_out's planes: reward, terminated, truncated, success and the outcome (screw_step::CAUSES).
+        let planes: Vec<Tensor<1>> = (0..5).map(|_| Tensor::<1>::empty([n], &self.device)).collect();
         let mut claims = Vec::new();
         let (claim, buf, off, _) = tensor_buffer(&wgpu_primitive(observation.clone(), "observation")?, "observation")?;
         claims.push(claim);
@@ -109,8 +110,10 @@ impl FrankaNutBoltDevice {
             claims.push(claim);
             enc.copy_buffer_to_buffer(&self.step.step_out, (k * n * 4) as u64, &buf, off, (n * 4) as u64);
         }
-        let [reward, terminated, truncated, success]: [Tensor<1>; 4] = planes.try_into().expect("four planes");
-        Ok((DeviceStep { observation, reward, terminated, truncated, success }, claims))
+        let [reward, terminated, truncated, success, outcome]: [Tensor<1>; 5] = planes.try_into().expect("5 planes");
+        // CAUSES: 0 running, 1 success, then the failures in failure_causes()' order.
+        let failure = Some(outcome.sub_scalar(1.0).clamp_min(0.0));
+        Ok((DeviceStep { observation, reward, terminated, truncated, success, failure }, claims))
     }
 
     fn try_step(&mut self, action: Tensor<2>) -> Result<DeviceStep> {
@@ -149,6 +152,20 @@ impl DeviceEnv for FrankaNutBoltDevice {
             Ok(out) => out,
             Err(e) => panic!("franka_nut_bolt (device): {e}"),
         }
+    }
+
+    fn failure_causes(&self) -> &'static [&'static str] {
+        &CAUSES[2..]
+    }
+
+    /// The device state (module docs of [`ScrewStepGpu::save`]), read back once: a resumed run continues
+    /// its episodes exactly.
+    fn save_state(&self) -> Option<Vec<u8>> {
+        Some(self.step.save(self.gpu, &self.env.scene().sim))
+    }
+
+    fn load_state(&mut self, bytes: &[u8]) -> Result<()> {
+        self.step.load(self.gpu, &self.env.scene().sim, bytes)
     }
 
     fn set_episode_steps(&mut self, steps: &[u32]) -> Result<()> {

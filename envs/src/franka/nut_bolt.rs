@@ -645,6 +645,11 @@ impl FrankaNutBolt {
         &self.screw
     }
 
+    /// The pads' contact pairs with the nut (left, right) and whether the nut is each pair's query side.
+    pub fn pad_pairs(&self) -> &[(usize, bool)] {
+        &self.pad_pairs
+    }
+
     /// The nut's centre of mass in its frame [m].
     pub fn nut_com_local(&self) -> Vec3 {
         self.com_local

@@ -19,7 +19,8 @@
 //! (its randomisation and inverse kinematics): a world that ends takes the bank entry a hash of (world,
 //! episode number) picks. Without randomisation the bank holds the one start; with it, `bank_count`
 //! draws, so episodes sample that finite set rather than fresh draws (4096 entries by default in the
-//! device env). Finger-force observations are not on the device yet (refused by name).
+//! device env). The pads' forces on the nut (`observe_finger_force`) are summed from the solve's rows in
+//! place, as the host's `pair_forces` reads them.
 //!
 //! Layout of the env's buffers: `env_state` per world 4 vec4 (steps in the episode and episodes ended, as
 //! whole numbers in f32; then the previous action, 12 floats); `step_out` 5 planes of world_count f32
@@ -42,8 +43,10 @@ use super::scene::{ARM_DOF, DOF};
 use crate::env::{Env, StepBuffers};
 use crate::error::{EnvError, Result};
 
-/// The kernels' source.
-pub const SCREW_STEP_WGSL: &str = include_str!("screw_step.wgsl");
+/// The kernels' source: screw_step.wgsl, then the engine's `any_orthonormal`.
+pub fn screw_step_wgsl() -> String {
+    format!("{}{}", include_str!("screw_step.wgsl"), factory_engine::solver::ANY_ORTHONORMAL_WGSL)
+}
 
 /// Worlds per workgroup (`@workgroup_size` of screw_step.wgsl).
 pub const SCREW_STEP_WG: u32 = 64;
@@ -70,7 +73,13 @@ pub struct ScrewParamsGpu {
     pub max_episode_steps: u32,
     pub obs_dim: u32,
     pub flags: u32,
-    pub _pad: [u32; 2],
+    pub rows_base: u32,
+    pub rows_per_world: u32,
+    pub rows_per_pair: u32,
+    pub row_vec4: u32,
+    pub pad_pair_left: u32,
+    pub pad_pair_right: u32,
+    pub _pad: [u32; 4],
     /// The nut's centre of mass in its frame [m] (xyz).
     pub com_local: [f32; 4],
     /// The seated centre of mass [m] (xyz).
@@ -79,6 +88,8 @@ pub struct ScrewParamsGpu {
     pub geometry: [f32; 4],
     /// Failure distance [m], success bonus, failure penalty, finger pad length [m].
     pub scoring: [f32; 4],
+    /// Impulse to force [1/s] (substeps / dt), the left and right pad pairs' signs (force on the nut), 0.
+    pub forces: [f32; 4],
 }
 
 struct Kernel {
@@ -115,16 +126,10 @@ impl ScrewStepGpu {
     /// The device step for `env`, whose coupled solve it moves to the device (lavapipe without a GPU).
     /// `bank_count` start states are drawn for resets when the env randomises them (one otherwise); this
     /// draws from the env's generator and leaves world 0 at the last draw (call [`reset`](Self::reset)).
-    /// Refuses finger-force observations, a controller without a device kernel (the joint-space ones, an
-    /// analytic Jacobian), and arm joints with position drives (the step holds the drives' targets at 0).
+    /// Refuses a controller without a device kernel (the joint-space ones, an analytic Jacobian) and arm
+    /// joints with position drives (the step holds the drives' targets at 0).
     pub fn new(gpu: &GpuContext, env: &mut FrankaNutBolt, bank_count: usize) -> Result<Self> {
         let cfg = env.config().clone();
-        if cfg.observe_finger_force {
-            return Err(EnvError::InvalidValue {
-                field: "observe_finger_force",
-                reason: "the pads' forces are not observed on the device yet; use the host env (false here)".into(),
-            });
-        }
         let n = env.spec().env_count;
         let obs_dim = env.spec().observation_dim();
         env.scene_mut().sim.solve_on(gpu, CoupledSolve::Device)?;
@@ -149,6 +154,9 @@ impl ScrewStepGpu {
         let sim = &env.scene().sim;
         let dev = sim.device_solver().expect("built above");
         let c = dev.coupling();
+        let rows = dev.rows_layout();
+        let pads = env.pad_pairs();
+        let sign = |nut_is_query: bool| if nut_is_query { 1.0 } else { -1.0 };
         let screw = env.screw();
         let body_count = sim.model.bodies.body_count() as u32;
         let params = ScrewParamsGpu {
@@ -165,12 +173,19 @@ impl ScrewStepGpu {
             bank_stride: 2 * body_count + c.joint_vec4s,
             max_episode_steps: cfg.max_episode_steps,
             obs_dim: obs_dim as u32,
-            flags: cfg.observe_previous_action as u32,
-            _pad: [0; 2],
+            flags: cfg.observe_previous_action as u32 | (cfg.observe_finger_force as u32) << 1,
+            rows_base: rows.rows_base,
+            rows_per_world: rows.rows_per_world,
+            rows_per_pair: rows.rows_per_pair,
+            row_vec4: rows.row_vec4,
+            pad_pair_left: pads[0].0 as u32,
+            pad_pair_right: pads[1].0 as u32,
+            _pad: [0; 4],
             com_local: env.nut_com_local().extend(0.0).to_array(),
             seated: screw.target.extend(0.0).to_array(),
             geometry: [screw.pitch, screw.nut_height, screw.bolt_diameter, screw.bolt_top],
             scoring: [screw.far_error, cfg.success_bonus, cfg.failure_penalty, FINGERPAD_LENGTH],
+            forces: [cfg.substeps as f32 / cfg.dt, sign(pads[0].1), sign(pads[1].1), 0.0],
         };
         let uniform = gpu.uniform_buffer("screw-step-params", bytemuck::bytes_of(&params));
         let bank = gpu.storage_buffer("screw-start-bank", &bank, wgpu::BufferUsages::empty());
@@ -179,10 +194,11 @@ impl ScrewStepGpu {
         let obs = gpu.storage_buffer_zeroed("screw-obs", (n * obs_dim) as u64 * 4);
         let (ro, rw) = (Binding::Storage { read_only: true }, Binding::Storage { read_only: false });
         let model = [&uniform, &bank];
+        let source = screw_step_wgsl();
         let kernel = |entry: &str, ins: &[&wgpu::Buffer], outs: &[&wgpu::Buffer]| {
             let (ins_b, outs_b) = (vec![ro; ins.len()], vec![rw; outs.len()]);
             let layout = gpu.explicit_layout(entry, &[&[Binding::Uniform, ro], &ins_b, &outs_b]);
-            let pipeline = gpu.pipeline_on(&layout, entry, SCREW_STEP_WGSL, entry);
+            let pipeline = gpu.pipeline_on(&layout, entry, &source, entry);
             let groups = [
                 gpu.bind_explicit(&layout, 0, &model, 0),
                 gpu.bind_explicit(&layout, 1, ins, 0),
@@ -197,7 +213,11 @@ impl ScrewStepGpu {
             &[&art.world_dynamics, &action.actions],
             &[&sim.pipe.body_q, &dev.body_qd, &dev.scratch, &env_state, &step_out],
         );
-        let observe = kernel("observe", &[&art.world_dynamics, &sim.pipe.body_q, &dev.body_qd, &env_state], &[&obs]);
+        let observe = kernel(
+            "observe",
+            &[&art.world_dynamics, &sim.pipe.body_q, &dev.body_qd, &env_state, &dev.scratch],
+            &[&obs],
+        );
         Ok(ScrewStepGpu {
             world_count: n as u32,
             obs_dim,
@@ -281,6 +301,62 @@ impl ScrewStepGpu {
         Ok(())
     }
 
+    /// Every world's state as bytes (read back from the device: for checkpoints, never per step): the bodies'
+    /// poses and velocities, the solve's scratch (its warm-start rows, joints and status) and the episodes'
+    /// counters and previous actions. The reset bank is not in it: an env built from the same config and
+    /// seed draws the same one.
+    pub fn save(&self, gpu: &GpuContext, sim: &ArticulatedSim) -> Vec<u8> {
+        let dev = sim.device_solver().expect("new() moved the solve to the device");
+        let mut bytes = Vec::new();
+        for buffer in [&sim.pipe.body_q, &dev.body_qd, &dev.scratch, &self.env_state] {
+            let b: Vec<u8> = gpu.read_buffer(buffer);
+            bytes.extend_from_slice(&(b.len() as u64).to_le_bytes());
+            bytes.extend_from_slice(&b);
+        }
+        bytes
+    }
+
+    /// Restores what [`save`](Self::save) wrote for an env of the same config and world count, and the
+    /// fingertip's record and the observation from it (queued: lands before the next submission).
+    pub fn load(&self, gpu: &GpuContext, sim: &ArticulatedSim, bytes: &[u8]) -> Result<()> {
+        let dev = sim.device_solver().expect("new() moved the solve to the device");
+        let buffers = [&sim.pipe.body_q, &dev.body_qd, &dev.scratch, &self.env_state];
+        let mut sections = Vec::new();
+        let mut at = 0usize;
+        for buffer in buffers {
+            let len = bytes.get(at..at + 8).map(|b| u64::from_le_bytes(b.try_into().unwrap()));
+            let section = len.and_then(|len| bytes.get(at + 8..at + 8 + len as usize));
+            match section {
+                Some(s) if s.len() as u64 == buffer.size() => sections.push(s),
+                _ => {
+                    return Err(EnvError::InvalidValue {
+                        field: "state",
+                        reason: format!(
+                            "franka_nut_bolt (device): saved for another config or number of worlds ({} bytes at \
+                             {at}, the buffer holds {})",
+                            len.unwrap_or(0),
+                            buffer.size()
+                        ),
+                    })
+                }
+            }
+            at += 8 + sections.last().unwrap().len();
+        }
+        if at != bytes.len() {
+            return Err(EnvError::InvalidValue {
+                field: "state",
+                reason: format!("franka_nut_bolt (device): {} bytes, {at} expected", bytes.len()),
+            });
+        }
+        for (buffer, section) in buffers.into_iter().zip(sections) {
+            gpu.queue.write_buffer(buffer, 0, section);
+        }
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        self.encode_observe(&mut enc);
+        gpu.queue.submit([enc.finish()]);
+        Ok(())
+    }
+
     /// Reads the last step's outputs into `out` (waits for the GPU: for tests and evaluation, never in a
     /// rollout).
     pub fn read(&self, gpu: &GpuContext, out: &mut StepBuffers) {
@@ -328,9 +404,20 @@ mod tests {
     #[test]
     fn screw_step_shader_validates_with_naga() {
         let check = |src: &str| factory_engine::gpu::validate_wgsl(src, false);
-        if let Err(e) = check(SCREW_STEP_WGSL) {
+        if let Err(e) = check(&screw_step_wgsl()) {
             panic!("screw_step.wgsl:\n{e}");
         }
-        assert!(check(&SCREW_STEP_WGSL.replace("obs[o + k] = head[k];", "obs[o + k] = head;")).is_err());
+        assert!(check(&screw_step_wgsl().replace("obs[o + k] = head[k];", "obs[o + k] = head;")).is_err());
+    }
+
+    /// The Pod mirror has the size naga lays `ScrewParams` out with (a regression: two pad words short, the
+    /// uniform was bound 8 bytes smaller than the shader's struct).
+    #[test]
+    fn screw_params_match_their_mirror() {
+        let module = naga::front::wgsl::parse_str(&screw_step_wgsl()).unwrap();
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).unwrap();
+        let (h, _) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some("ScrewParams")).unwrap();
+        assert_eq!(layouter[h].size as usize, std::mem::size_of::<ScrewParamsGpu>());
     }
 }

@@ -2,7 +2,7 @@
 // layouts): `push_torque` hands the controller kernel's torques to the coupled solve, `pull_joints` hands
 // the solve's joints back to the articulation kernel, `evaluate` is nut_bolt.rs's reward, outcome, time
 // limit and masked reset (from a bank of start states), `observe` its observation. One invocation per
-// world in each.
+// world in each. The engine's orthonormal.wgsl (`any_orthonormal`) is appended.
 
 struct ScrewParams {
     world_count: u32,
@@ -25,11 +25,20 @@ struct ScrewParams {
     bank_count: u32,
     bank_stride: u32,
     max_episode_steps: u32,
-    // Floats per observation; bit 0 of flags: append the previous action.
+    // Floats per observation; flags: bit 0 append the previous action, bit 1 the pads' forces on the nut.
     obs_dim: u32,
     flags: u32,
+    // The solve's contact rows in its scratch (solver/articulated.rs RowsLayout) and the pads' pairs.
+    rows_base: u32,
+    rows_per_world: u32,
+    rows_per_pair: u32,
+    row_vec4: u32,
+    pad_pair_left: u32,
+    pad_pair_right: u32,
     _pad0: u32,
     _pad1: u32,
+    _pad2: u32,
+    _pad3: u32,
     // The nut's centre of mass in its frame [m] (xyz).
     com_local: vec4<f32>,
     // Where the centre of mass is when seated [m] (xyz).
@@ -38,6 +47,9 @@ struct ScrewParams {
     geometry: vec4<f32>,
     // Failure distance [m], success bonus, failure penalty, finger pad length [m].
     scoring: vec4<f32>,
+    // Impulse to mean force over the last substep [1/s] (substeps / dt), and the sign that turns each pad
+    // pair's impulse into the force on the nut (+1 where the nut is the pair's query side).
+    forces: vec4<f32>,
 }
 
 // Keypoint segment length [m] (nut_bolt.rs KEYPOINT_AXIS).
@@ -79,6 +91,7 @@ const DIVERGED: f32 = 5.0;
 @group(1) @binding(1) var<storage, read> body_q_in: array<vec4<f32>>;
 @group(1) @binding(2) var<storage, read> body_qd_in: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read> env_state_in: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read> rows_in: array<vec4<f32>>;
 @group(2) @binding(0) var<storage, read_write> obs: array<f32>;
 
 fn rotate(q: vec4<f32>, v: vec3<f32>) -> vec3<f32> {
@@ -237,6 +250,24 @@ fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>) {
     env_state[4u * w] = vec4<f32>(0.0, counters.y + 1.0, 0.0, 0.0);
 }
 
+// The summed impulse [N s] of pair `pair`'s rows of the world's last frame (GpuArticulatedSolver::pair_impulse
+// on the device: the same rows in the same order).
+fn pair_impulse(w: u32, pair: u32) -> vec3<f32> {
+    let frame = bitcast<u32>(rows_in[w].w);
+    let first = params.rows_base + (w * params.rows_per_world + pair * params.rows_per_pair) * params.row_vec4;
+    var sum = vec3<f32>(0.0);
+    for (var k = 0u; k < params.rows_per_pair; k++) {
+        let r = first + k * params.row_vec4;
+        let n = rows_in[r + 2u].xyz;
+        if (bitcast<u32>(rows_in[r].w) == pair && bitcast<u32>(rows_in[r + 3u].w) == frame && any(n != vec3<f32>(0.0))) {
+            let t1 = any_orthonormal(n);
+            let i = rows_in[r + 1u];
+            sum += i.x * n + i.y * t1 + i.z * cross(n, t1);
+        }
+    }
+    return sum;
+}
+
 @compute @workgroup_size(64)
 fn observe(@builtin(global_invocation_id) gid: vec3<u32>) {
     let w = gid.x;
@@ -264,13 +295,23 @@ fn observe(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var k = 0u; k < 26u; k++) {
         obs[o + k] = head[k];
     }
+    var at = o + 26u;
+    if ((params.flags & 2u) != 0u) {
+        let left = pair_impulse(w, params.pad_pair_left) * (params.forces.x * params.forces.y);
+        let right = pair_impulse(w, params.pad_pair_right) * (params.forces.x * params.forces.z);
+        let f = array<f32, 6>(left.x, left.y, left.z, right.x, right.y, right.z);
+        for (var k = 0u; k < 6u; k++) {
+            obs[at + k] = f[k];
+        }
+        at += 6u;
+    }
     if ((params.flags & 1u) != 0u) {
         for (var k = 0u; k < 3u; k++) {
             let a = env_state_in[4u * w + 1u + k];
-            obs[o + 26u + 4u * k] = a.x;
-            obs[o + 27u + 4u * k] = a.y;
-            obs[o + 28u + 4u * k] = a.z;
-            obs[o + 29u + 4u * k] = a.w;
+            obs[at + 4u * k] = a.x;
+            obs[at + 4u * k + 1u] = a.y;
+            obs[at + 4u * k + 2u] = a.z;
+            obs[at + 4u * k + 3u] = a.w;
         }
     }
 }

@@ -1,0 +1,52 @@
+//! The Screw env resident on the device (`FrankaNutBoltDevice`) under the learner on burn's wgpu backend over
+//! the engine's device: issue 22's "nothing is read back per step except an explicit logging summary". Needs
+//! `--features wgpu`; its own test binary, so the engine's process-wide sync count sees this test alone.
+
+#![cfg(feature = "wgpu")]
+
+use std::path::PathBuf;
+
+use factory_engine::gpu::host_syncs;
+use factory_envs::franka::device_env::FrankaNutBoltDevice;
+use factory_envs::{DeviceEnv, EnvConfig};
+use factory_rl::model::readbacks;
+use factory_rl::ppo::{DeviceEpisodes, Ppo};
+use factory_rl::TrainConfig;
+
+/// Two rollouts of 8 steps of 4 Screw worlds read nothing back and wait for nothing, neither in the learner
+/// (its readback choke point) nor in the engine (readbacks and waits); each update then reads its summary
+/// once, with finite losses and the episode tallies (episodes of 5 steps: an end per world per rollout at
+/// least), every failure counted under its cause.
+#[test]
+fn a_franka_device_rollout_reads_nothing_back_per_step() {
+    let (device, name) = factory_rl::train::engine_wgpu_device().expect("the engine's wgpu device");
+    eprintln!("learner on {name}");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../configs/screw_quick.toml");
+    let sets: Vec<String> = ["train.env_count=4", "ppo.horizon=8", "ppo.minibatch_size=16", "env.max_episode_steps=5"]
+        .map(String::from)
+        .into();
+    let cfg = TrainConfig::load(&path, &sets).unwrap();
+    let EnvConfig::FrankaNutBolt(env_cfg) = &cfg.env else { panic!("screw_quick.toml builds {:?}", cfg.env) };
+    let n = cfg.train.env_count;
+    let mut env = FrankaNutBoltDevice::new(env_cfg, n, 1, &device).unwrap();
+    let spec = env.spec().clone();
+    let mut ppo = Ppo::new(&cfg.ppo, n, spec.observation_dim(), spec.action_dim(), 1, device.clone());
+    let mut obs = env.reset().observation;
+    assert_eq!(env.failure_causes(), ["far", "slipped", "fallen", "diverged"]);
+    let mut episodes = DeviceEpisodes::with_causes(n, env.failure_causes().len(), &device);
+    for round in 0..2 {
+        let (learner, engine) = (readbacks(), host_syncs());
+        let rollout = ppo.collect_device(&mut env, &mut obs, &mut episodes);
+        assert_eq!(readbacks() - learner, 0, "round {round}: the learner read back during the rollout");
+        assert_eq!(host_syncs() - engine, 0, "round {round}: the engine read back or waited during the rollout");
+        let (stats, tallies) = ppo.update_with(rollout, Some(episodes.take()));
+        assert_eq!(readbacks() - learner, 1, "round {round}: an update reads its summary once");
+        assert!(stats.actor_loss.is_finite() && stats.critic_loss.is_finite(), "{stats:?}");
+        let ended_by = DeviceEpisodes::ended_by(&tallies, env.failure_causes());
+        eprintln!("round {round}: {stats:?}, tallies {tallies:?}, {ended_by:?}");
+        assert_eq!(tallies.len(), 9);
+        assert_eq!(ended_by.total(), tallies[0].round() as usize);
+        assert!(!ended_by.0.contains_key("failure"), "every failure has its cause: {ended_by:?}");
+        assert!(tallies[0] >= n as f32, "round {round}: {} episodes ended in 8 steps of 5-step episodes", tallies[0]);
+    }
+}
