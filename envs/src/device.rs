@@ -77,3 +77,26 @@ pub trait DeviceEnv: Send {
         })
     }
 }
+
+/// burn's wgpu runtime registered on the engine's device and queue (`WgpuSetup` from the engine's
+/// `GpuContext`), once per process (cubecl asks that a setup be registered once; the device is cloned after
+/// that): the learner's device under which device envs and the engine share buffers. Returns the device and
+/// a description; the error says why the runtime could not be made. Needs the `wgpu` feature.
+#[cfg(feature = "wgpu")]
+pub fn engine_wgpu_device() -> std::result::Result<(Device, String), String> {
+    static DEVICE: std::sync::OnceLock<std::result::Result<(Device, String), String>> = std::sync::OnceLock::new();
+    DEVICE
+        .get_or_init(|| {
+            let gpu = factory_engine::gpu::GpuContext::global().map_err(|e| e.to_string())?;
+            let setup = burn::tensor::wgpu::WgpuSetup {
+                instance: gpu.instance.clone(),
+                adapter: gpu.adapter.clone(),
+                device: gpu.device.clone(),
+                queue: gpu.queue.clone(),
+                backend: gpu.info.backend,
+            };
+            let device = Device::wgpu_options().setup(setup).init().map_err(|e| e.to_string())?;
+            Ok((device, format!("wgpu (burn on the engine's device: {}, {:?})", gpu.info.name, gpu.info.backend)))
+        })
+        .clone()
+}

@@ -189,25 +189,6 @@ fn a_saved_device_state_continues_bitwise() {
     eprintln!("{} bytes of state; {} steps after the load equal bitwise", saved.len(), straight.len());
 }
 
-/// burn's wgpu runtime on the engine's device and queue (as factory-rl's `engine_wgpu_device`), once.
-#[cfg(feature = "wgpu")]
-fn engine_burn_device() -> burn::prelude::Device {
-    static DEVICE: std::sync::OnceLock<burn::prelude::Device> = std::sync::OnceLock::new();
-    DEVICE
-        .get_or_init(|| {
-            let gpu = GpuContext::global().unwrap();
-            let setup = burn::tensor::wgpu::WgpuSetup {
-                instance: gpu.instance.clone(),
-                adapter: gpu.adapter.clone(),
-                device: gpu.device.clone(),
-                queue: gpu.queue.clone(),
-                backend: gpu.info.backend,
-            };
-            burn::prelude::Device::wgpu_options().setup(setup).init().unwrap()
-        })
-        .clone()
-}
-
 /// The DeviceEnv over burn tensors (actions in, observations and flags out, on the engine's wgpu device)
 /// steps as the host env: the first step of each episode to rounding, the flags of every step, and the
 /// next episode's first observation after each time limit. A flex (CPU) learner gets the host env from the
@@ -225,7 +206,7 @@ fn the_device_env_steps_burn_tensors_as_the_host_env() {
     let refused = FrankaNutBoltDevice::new(&cfg, n, 0, &flex).err().expect("flex is refused").to_string();
     assert!(refused.contains("ppo.device") && refused.contains("wgpu"), "{refused}");
     assert!(build_device(&EnvConfig::FrankaNutBolt(cfg.clone()), n, 0, &flex).unwrap().is_none());
-    let device = engine_burn_device();
+    let (device, _) = factory_envs::device::engine_wgpu_device().unwrap();
     let mut dev = build_device(&EnvConfig::FrankaNutBolt(cfg.clone()), n, 0, &device).unwrap().expect("a device env");
     let mut host = FrankaNutBolt::new(&cfg, n, 0).unwrap();
     let mut hb = StepBuffers::new(host.spec());

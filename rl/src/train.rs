@@ -34,24 +34,12 @@ pub fn resolve_device(choice: DeviceChoice) -> Result<(Device, String)> {
     }
 }
 
-/// burn's wgpu runtime registered on the engine's device and queue, once per process (cubecl asks that a
-/// setup be registered once; the device is cloned after that).
+/// burn's wgpu runtime registered on the engine's device and queue, once per process
+/// ([`factory_envs::device::engine_wgpu_device`]); its errors name `ppo.device`.
 #[cfg(feature = "wgpu")]
 pub fn engine_wgpu_device() -> Result<(Device, String)> {
-    static DEVICE: std::sync::OnceLock<std::result::Result<(Device, String), String>> = std::sync::OnceLock::new();
-    let made = DEVICE.get_or_init(|| {
-        let gpu = factory_engine::gpu::GpuContext::global().map_err(|e| e.to_string())?;
-        let setup = burn::tensor::wgpu::WgpuSetup {
-            instance: gpu.instance.clone(),
-            adapter: gpu.adapter.clone(),
-            device: gpu.device.clone(),
-            queue: gpu.queue.clone(),
-            backend: gpu.info.backend,
-        };
-        let device = Device::wgpu_options().setup(setup).init().map_err(|e| e.to_string())?;
-        Ok((device, format!("wgpu (burn on the engine's device: {}, {:?})", gpu.info.name, gpu.info.backend)))
-    });
-    made.clone().map_err(|reason| RlError::InvalidValue { field: "ppo.device".into(), reason })
+    factory_envs::device::engine_wgpu_device()
+        .map_err(|reason| RlError::InvalidValue { field: "ppo.device".into(), reason })
 }
 
 /// Without the `wgpu` feature: refused by name.
