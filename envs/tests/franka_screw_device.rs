@@ -189,6 +189,59 @@ fn a_saved_device_state_continues_bitwise() {
     eprintln!("{} bytes of state; {} steps after the load equal bitwise", saved.len(), straight.len());
 }
 
+/// A world that diverges (its nut's velocity made non-finite on the device) is flagged by the solve, ends as
+/// `diverged` and is reset in place to the start, while the other worlds step on bitwise as in a run without
+/// it; every observation after is finite.
+#[test]
+fn a_diverged_world_is_reset_and_leaves_the_others_alone() {
+    let gpu = GpuContext::global().unwrap();
+    let n = 3;
+    let cfg = FrankaNutBoltConfig { solve: CoupledSolve::Device, ..Default::default() };
+    let build = || {
+        let mut env = FrankaNutBolt::new(&cfg, n, 0).unwrap();
+        let step = ScrewStepGpu::new(gpu, &mut env, 1).unwrap();
+        step.reset(gpu, &mut env).unwrap();
+        (env, step)
+    };
+    let ((clean_env, clean), (sick_env, sick)) = (build(), build());
+    let d = clean_env.spec().observation_dim();
+    let (mut cb, mut sb) = (StepBuffers::new(clean_env.spec()), StepBuffers::new(sick_env.spec()));
+    sick.read(gpu, &mut sb);
+    let start = sb.observation[d..2 * d].to_vec();
+    let mut rng = SplitMix64(8);
+    for t in 0..8 {
+        if t == 3 {
+            // World 1's nut: its linear velocity in the solver's body_qd (2 vec4 per body).
+            let sim = &sick_env.scene().sim;
+            let nb = sim.model.bodies.body_count();
+            let at = ((nb + sick_env.scene().nut) * 2 * 16) as u64;
+            let dev = sim.device_solver().unwrap();
+            gpu.queue.write_buffer(&dev.body_qd, at, bytemuck::cast_slice(&[f32::NAN, f32::NAN, f32::NAN, 0.0]));
+        }
+        let a: Vec<f32> = (0..n * 12).map(|_| 2.0 * rng.unit() - 1.0).collect();
+        for (env, step, b) in [(&clean_env, &clean, &mut cb), (&sick_env, &sick, &mut sb)] {
+            step.action.write_actions(gpu, &a).unwrap();
+            step.step(gpu, &env.scene().sim);
+            step.read(gpu, b);
+        }
+        assert!(sb.observation.iter().all(|x| x.is_finite()), "step {t}: a non-finite observation");
+        for w in [0, 2] {
+            assert!(
+                cb.observation[w * d..(w + 1) * d] == sb.observation[w * d..(w + 1) * d]
+                    && cb.reward[w] == sb.reward[w],
+                "step {t}: world {w} changed with world 1's divergence"
+            );
+        }
+        if t == 3 {
+            assert_eq!((sb.terminated[1], sb.failure[1]), (1.0, Some("diverged")), "step {t}: world 1 not flagged");
+            let gap = start.iter().zip(&sb.observation[d..2 * d]).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+            assert!(gap < 1e-6, "world 1 was not put back at the start ({gap})");
+        } else {
+            assert_eq!(sb.terminated[1], 0.0, "step {t}: world 1 ended");
+        }
+    }
+}
+
 /// The DeviceEnv over burn tensors (actions in, observations and flags out, on the engine's wgpu device)
 /// steps as the host env: the first step of each episode to rounding, the flags of every step, and the
 /// next episode's first observation after each time limit. A flex (CPU) learner gets the host env from the

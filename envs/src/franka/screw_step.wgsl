@@ -230,18 +230,20 @@ fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>) {
         env_state[4u * w] = counters;
         return;
     }
-    // Masked reset (nut_bolt.rs NutBoltScene::reset_world): the bank's bodies and joints, the nut and the
-    // joints at rest, and a cold warm start: the solver matches only rows stamped with the frame before
-    // (solver_core.wgsl match_old), so skipping a frame number forgets every row of this world.
+    // Masked reset (nut_bolt.rs NutBoltScene::reset_world): the bank's bodies and joints, every body and
+    // joint at rest (the host zeroes the nut's and the joints' velocities; the link bodies' twists follow
+    // from the joints at the step's end, and zeroing them too clears a diverged world's), and a cold warm
+    // start: the solver matches only rows stamped with the frame before (solver_core.wgsl match_old), so
+    // skipping a frame number forgets every row of this world.
     let episode = u32(counters.y);
     let e = pick(w, episode) * params.bank_stride;
     for (var b = 0u; b < params.body_count; b++) {
         let at = 2u * (w * params.body_count + b);
         body_q[at] = bank[e + 2u * b];
         body_q[at + 1u] = bank[e + 2u * b + 1u];
+        body_qd[at] = vec4<f32>(0.0);
+        body_qd[at + 1u] = vec4<f32>(0.0);
     }
-    body_qd[2u * nb] = vec4<f32>(0.0);
-    body_qd[2u * nb + 1u] = vec4<f32>(0.0);
     for (var v = 0u; v < params.joint_vec4s; v++) {
         scratch[joint_at(0u, w, 4u * v)] = bank[e + 2u * params.body_count + v];
         scratch[joint_at(1u, w, 4u * v)] = vec4<f32>(0.0);
