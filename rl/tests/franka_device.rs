@@ -50,3 +50,39 @@ fn a_franka_device_rollout_reads_nothing_back_per_step() {
         assert!(tallies[0] >= n as f32, "round {round}: {} episodes ended in 8 steps of 5-step episodes", tallies[0]);
     }
 }
+
+/// A checkpoint carries the device Screw env: a trainer resumed from one taken after 2 updates holds the
+/// saved trainer's device state (bodies, the solve's warm-start rows and joints, the episodes' counters) and
+/// observations bitwise. (That a loaded state then steps on bitwise is envs/tests/franka_screw_device.rs;
+/// the learner on burn-wgpu is not bitwise repeatable across trainers in every run, so their updates are not
+/// compared here.)
+#[test]
+fn a_franka_device_checkpoint_carries_the_env_state() {
+    use factory_rl::train::{EnvRun, Trainer};
+    let (device, _) = factory_rl::train::engine_wgpu_device().expect("the engine's wgpu device");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../configs/screw_quick.toml");
+    let sets: Vec<String> = ["train.env_count=4", "ppo.horizon=8", "ppo.minibatch_size=16", "env.max_episode_steps=12"]
+        .map(String::from)
+        .into();
+    let cfg = TrainConfig::load(&path, &sets).unwrap();
+    let dir = std::env::temp_dir().join(format!("factory-rl-franka-device-{}", std::process::id()));
+    let ck = dir.join("checkpoint.bin");
+    let mut first = Trainer::new(cfg, device.clone()).unwrap();
+    assert!(first.run.on_device(), "a wgpu learner takes the device env");
+    first.update();
+    first.update();
+    first.save_checkpoint(&ck).unwrap();
+    let resumed = Trainer::resume(&ck, device).unwrap();
+    let state = |t: &Trainer| match &t.run {
+        EnvRun::Device { env, obs, .. } => {
+            (env.save_state().expect("the device env saves"), obs.clone().into_data().try_into_vec::<f32>().unwrap())
+        }
+        EnvRun::Host { .. } => panic!("the device env"),
+    };
+    let ((saved, saved_obs), (loaded, loaded_obs)) = (state(&first), state(&resumed));
+    assert!(saved.len() > 100_000, "{} bytes of device state", saved.len());
+    assert!(saved == loaded, "the resumed env's device state differs");
+    assert!(saved_obs == loaded_obs, "the resumed observations differ");
+    assert_eq!(resumed.updates_done, 2);
+    std::fs::remove_dir_all(&dir).ok();
+}
