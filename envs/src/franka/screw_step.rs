@@ -1,7 +1,8 @@
 //! The Screw env's whole step on the device (`screw_step.wgsl` with the engine's and the controllers'
 //! kernels): from the policy's actions in a device buffer to observations, rewards and done flags in device
 //! buffers, with the worlds that ended reset in place. Nothing comes back to the host per step; the host
-//! [`FrankaNutBolt`] is the reference (the test below steps both from the same start, same actions).
+//! [`FrankaNutBolt`] is the reference (envs/tests/franka_screw_device.rs steps both from the same start
+//! with the same actions).
 //!
 //! One step, recorded into one command buffer (DESIGN.md 5, "rollouts stay on the GPU"):
 //! 1. [`ActionGpu`]: actions to the controller's targets, relative to the fingertip in the articulation
