@@ -129,6 +129,9 @@ pub struct FrankaNutBoltConfig {
     pub bolt_tip_chamfer: bool,
     /// Thread columns per turn of the generated nut mesh.
     pub segments_per_turn: usize,
+    /// Projected-gradient iterations per nut triangle in contact generation (ContactConfig::iterations;
+    /// the engine's default 12).
+    pub contact_descent_iters: u32,
     /// Start the nut on the bolt's first full thread below the tip's chamfer (engaged) instead of resting
     /// on the tip (IsaacGymEnvs' Screw, the default). Factory's Screw controller acts on z and yaw only, so
     /// only the bolt holds the hand sideways: on a flat-cut tip the nut slid off it (see
@@ -186,6 +189,7 @@ impl Default for FrankaNutBoltConfig {
             thread_mu: 0.3,
             bolt_tip_chamfer: true,
             segments_per_turn: 48,
+            contact_descent_iters: ContactConfig::default().iterations,
             far_error: 0.1,
             success_bonus: 0.0,
             failure_penalty: 0.0,
@@ -235,6 +239,9 @@ impl FrankaNutBoltConfig {
             if !(lo.is_finite() && hi.is_finite() && lo <= hi && lo >= -limit && hi <= limit) {
                 return bad(field, format!("[{lo}, {hi}] must be a range lo <= hi within [-{limit}, {limit}]"));
             }
+        }
+        if !(1..=64).contains(&self.contact_descent_iters) {
+            return bad("contact_descent_iters", format!("{} is not in 1..=64", self.contact_descent_iters));
         }
         if self.segments_per_turn < 8 {
             return bad("segments_per_turn", format!("{} is below 8", self.segments_per_turn));
@@ -433,7 +440,11 @@ impl FrankaNutBolt {
             solver,
             // One split of the contact jobs for every batch size, so a world's physics (and an evaluation
             // with any `--envs`) is that of training at 128 worlds (tests/franka_screw.rs).
-            contact: ContactConfig { chunk_world_count: 128, ..ContactConfig::default() },
+            contact: ContactConfig {
+                chunk_world_count: 128,
+                iterations: cfg.contact_descent_iters,
+                ..ContactConfig::default()
+            },
             segments_per_turn: cfg.segments_per_turn,
             thread_mu: cfg.thread_mu,
             base: BASE,
