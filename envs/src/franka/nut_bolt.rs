@@ -954,6 +954,21 @@ mod tests {
         assert_eq!(at(-(limit - 1e-4)), Outcome::Running);
     }
 
+    /// Bad config values are refused naming the field and the valid range, before any scene is built.
+    #[test]
+    fn bad_config_values_name_their_field() {
+        let cases = [
+            (FrankaNutBoltConfig { contact_descent_iters: 0, ..Default::default() }, "contact_descent_iters", "1..=64"),
+            (FrankaNutBoltConfig { grasp_height: 0.02, ..Default::default() }, "grasp_height", "[-0.005, 0.01]"),
+            (FrankaNutBoltConfig { segments_per_turn: 4, ..Default::default() }, "segments_per_turn", "below 8"),
+        ];
+        for (cfg, field, valid) in cases {
+            let e = cfg.check().unwrap_err().to_string();
+            assert!(e.contains(field) && e.contains(valid), "{e}");
+        }
+        assert!(FrankaNutBoltConfig::default().check().is_ok());
+    }
+
     /// Each failure is reported by its cause: off the axis below the bolt's top is `fallen` (whether or not the
     /// pads still hold it), more than `far_error` from the target with the pads on the nut is `far`.
     #[test]
