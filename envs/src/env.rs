@@ -193,6 +193,29 @@ pub trait Env: Send {
     }
 }
 
+/// Appends `sections` to `out`, each as its length in bytes (u64, little-endian) then its bytes: the framing of
+/// the envs' saved states ([`Env::save_state`]).
+pub fn frame_sections(out: &mut Vec<u8>, sections: &[&[u8]]) {
+    for s in sections {
+        out.extend_from_slice(&(s.len() as u64).to_le_bytes());
+        out.extend_from_slice(s);
+    }
+}
+
+/// The first `count` sections [`frame_sections`] wrote at the start of `bytes`, and how many bytes they took;
+/// None where `bytes` ends before them.
+pub fn split_sections(bytes: &[u8], count: usize) -> Option<(Vec<&[u8]>, usize)> {
+    let mut at = 0usize;
+    let mut sections = Vec::with_capacity(count);
+    for _ in 0..count {
+        let len = u64::from_le_bytes(bytes.get(at..at + 8)?.try_into().unwrap()) as usize;
+        at += 8;
+        sections.push(bytes.get(at..at.checked_add(len)?)?);
+        at += len;
+    }
+    Some((sections, at))
+}
+
 /// Checks a [`Env::set_episode_steps`] argument against `spec`: one count per world, each below the limit.
 pub fn check_episode_steps(spec: &EnvSpec, steps: &[u32]) -> Result<()> {
     if steps.len() != spec.env_count {

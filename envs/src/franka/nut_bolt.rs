@@ -795,25 +795,14 @@ impl Env for FrankaNutBolt {
             self.rng.0.to_le_bytes().to_vec(),
         ];
         let mut b = Vec::new();
-        for s in sections {
-            b.extend_from_slice(&(s.len() as u64).to_le_bytes());
-            b.extend_from_slice(&s);
-        }
+        crate::env::frame_sections(&mut b, &sections.each_ref().map(|s| s.as_slice()));
         Some(b)
     }
 
     fn load_state(&mut self, bytes: &[u8]) -> Result<()> {
         let bad =
             |reason: &str| EnvError::InvalidValue { field: "state", reason: format!("franka_nut_bolt: {reason}") };
-        let mut at = 0usize;
-        let mut sections = Vec::new();
-        for _ in 0..8 {
-            let len = bytes.get(at..at + 8).ok_or_else(|| bad("truncated"))?;
-            let len = u64::from_le_bytes(len.try_into().unwrap()) as usize;
-            at += 8;
-            sections.push(bytes.get(at..at + len).ok_or_else(|| bad("truncated"))?);
-            at += len;
-        }
+        let (sections, _) = crate::env::split_sections(bytes, 8).ok_or_else(|| bad("truncated"))?;
         let sim = &mut self.scene.sim;
         let f32s =
             |b: &[u8]| -> Vec<f32> { b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect() };

@@ -151,10 +151,10 @@ impl ScrewStepGpu {
         let dev = env.scene_mut().sim.device_solver_mut().expect("solve_on(Device) built it");
         dev.write_control(gpu, &Control::default(), &hold)?;
         let bank_count = if cfg.randomize == ScrewRandomization::default() { 1 } else { bank_count.max(1) };
-        let bank = start_bank(env, bank_count);
+        let c = *dev.coupling();
+        let bank = start_bank(env, bank_count, c.joint_vec4s as usize);
         let sim = &env.scene().sim;
         let dev = sim.device_solver().expect("built above");
-        let c = dev.coupling();
         let rows = dev.rows_layout();
         let pads = env.pad_pairs();
         let sign = |nut_is_query: bool| if nut_is_query { 1.0 } else { -1.0 };
@@ -308,12 +308,9 @@ impl ScrewStepGpu {
     /// seed draws the same one.
     pub fn save(&self, gpu: &GpuContext, sim: &ArticulatedSim) -> Vec<u8> {
         let dev = sim.device_solver().expect("new() moved the solve to the device");
+        let read = [&sim.pipe.body_q, &dev.body_qd, &dev.scratch, &self.env_state].map(|b| gpu.read_buffer::<u8>(b));
         let mut bytes = Vec::new();
-        for buffer in [&sim.pipe.body_q, &dev.body_qd, &dev.scratch, &self.env_state] {
-            let b: Vec<u8> = gpu.read_buffer(buffer);
-            bytes.extend_from_slice(&(b.len() as u64).to_le_bytes());
-            bytes.extend_from_slice(&b);
-        }
+        crate::env::frame_sections(&mut bytes, &read.each_ref().map(|b| b.as_slice()));
         bytes
     }
 
@@ -322,32 +319,23 @@ impl ScrewStepGpu {
     pub fn load(&self, gpu: &GpuContext, sim: &ArticulatedSim, bytes: &[u8]) -> Result<()> {
         let dev = sim.device_solver().expect("new() moved the solve to the device");
         let buffers = [&sim.pipe.body_q, &dev.body_qd, &dev.scratch, &self.env_state];
-        let mut sections = Vec::new();
-        let mut at = 0usize;
-        for buffer in buffers {
-            let len = bytes.get(at..at + 8).map(|b| u64::from_le_bytes(b.try_into().unwrap()));
-            let section = len.and_then(|len| bytes.get(at + 8..at + 8 + len as usize));
-            match section {
-                Some(s) if s.len() as u64 == buffer.size() => sections.push(s),
-                _ => {
-                    return Err(EnvError::InvalidValue {
-                        field: "state",
-                        reason: format!(
-                            "franka_nut_bolt (device): saved for another config or number of worlds ({} bytes at \
-                             {at}, the buffer holds {})",
-                            len.unwrap_or(0),
-                            buffer.size()
-                        ),
-                    })
-                }
+        let bad = |reason: String| EnvError::InvalidValue {
+            field: "state",
+            reason: format!("franka_nut_bolt (device): {reason}"),
+        };
+        let (sections, at) = crate::env::split_sections(bytes, buffers.len())
+            .ok_or_else(|| bad(format!("truncated ({} bytes)", bytes.len())))?;
+        for (k, (s, buffer)) in sections.iter().zip(buffers).enumerate() {
+            if s.len() as u64 != buffer.size() {
+                return Err(bad(format!(
+                    "saved for another config or number of worlds (section {k}: {} bytes, the buffer holds {})",
+                    s.len(),
+                    buffer.size()
+                )));
             }
-            at += 8 + sections.last().unwrap().len();
         }
         if at != bytes.len() {
-            return Err(EnvError::InvalidValue {
-                field: "state",
-                reason: format!("franka_nut_bolt (device): {} bytes, {at} expected", bytes.len()),
-            });
+            return Err(bad(format!("{} bytes, {at} expected", bytes.len())));
         }
         for (buffer, section) in buffers.into_iter().zip(sections) {
             gpu.queue.write_buffer(buffer, 0, section);
@@ -377,8 +365,8 @@ impl ScrewStepGpu {
 
 /// `count` start states from the env's reset (world 0's host state is the scratch): per state the world's
 /// body poses (2 vec4 each, the link bodies where the joints put them), then the joint positions padded to
-/// the solver's joint_vec4s.
-fn start_bank(env: &mut FrankaNutBolt, count: usize) -> Vec<[f32; 4]> {
+/// `joint_vec4s` vec4 (the solver's).
+fn start_bank(env: &mut FrankaNutBolt, count: usize, joint_vec4s: usize) -> Vec<[f32; 4]> {
     let mut bank = Vec::new();
     for _ in 0..count {
         env.reset_world(0);
@@ -389,9 +377,8 @@ fn start_bank(env: &mut FrankaNutBolt, count: usize) -> Vec<[f32; 4]> {
             bank.push(t.p);
             bank.push(t.q);
         }
-        let vec4s = sim.device_solver().map_or(DOF.div_ceil(4), |d| d.coupling().joint_vec4s as usize);
         let mut q = sim.joints.joint_q[..DOF].to_vec();
-        q.resize(4 * vec4s, 0.0);
+        q.resize(4 * joint_vec4s, 0.0);
         bank.extend(q.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]));
     }
     bank
