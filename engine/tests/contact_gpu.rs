@@ -341,7 +341,7 @@ fn jobs_that_overflow_their_patch_budget_are_redone_with_eviction() {
         assert_eq!(pipe.flat.jobs.len(), 3, "{cfg:?}");
         pipe.write_body_q(g, &poses);
         pipe.run(g);
-        let listed = g.read_buffer::<u32>(&pipe.retry_jobs)[0];
+        let listed = pipe.retried_jobs(g);
         assert_eq!(listed, overflowing, "max_patches {max_patches}: jobs listed for the retry pass");
         let (gpu, cpu) = (pipe.read(g), pipe.contacts_cpu(&poses));
         for w in 0..worlds as usize {
@@ -354,5 +354,64 @@ fn jobs_that_overflow_their_patch_budget_are_redone_with_eviction() {
             );
             assert_patch_sets_match(&gpu.patches[w], &cpu.patches[w], &format!("max_patches {max_patches}, world {w}"));
         }
+    }
+}
+
+/// A job that overflowed stays flagged and goes straight to the evicting pass in later frames (no plain
+/// run first); an evicting run that evicts nothing gives the plain run's patches bitwise and clears the
+/// flag. Regression: the Franka's nut on the thread overflowed its 64 patches in ~121 of 128 worlds every
+/// frame, and each was generated twice (first pass, then retry).
+#[test]
+fn overflowing_jobs_stay_flagged_until_a_frame_evicts_nothing() {
+    let g = gpu();
+    let r = 0.05;
+    let grid = Arc::new(sphere_grid(r, 48));
+    let model = soup_vs_grid(shell_soup(3000, r, 0x9E3779B97F4A7C15), grid);
+    let worlds = 3;
+    let overlapping = turned_poses(worlds);
+    // The soup's shell beside the sphere, touching it at one point: a small cap of normals, few patches.
+    let beside: Vec<TransformGpu> = overlapping
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            if i % 2 == 0 {
+                TransformGpu::new(Vec3::new(2.0 * r + 0.008, 0.0, 0.0), Quat::from_array(t.q))
+            } else {
+                *t
+            }
+        })
+        .collect();
+    for per in [1, 4] {
+        let cfg = ContactConfig {
+            max_patches: 16,
+            chunk_triangles: 1024,
+            candidates_per_invocation: per,
+            ..Default::default()
+        };
+        let frame = |pipe: &ContactPipeline, poses: &[TransformGpu]| {
+            pipe.write_body_q(g, poses);
+            pipe.run(g);
+            (pipe.retried_jobs(g), pipe.read(g))
+        };
+        // Beside, in a fresh pipeline: nothing overflows.
+        let fresh = ContactPipeline::new(g, &model, worlds, &cfg).unwrap();
+        let (listed, beside_plain) = frame(&fresh, &beside);
+        assert_eq!(listed, 0, "per {per}: beside, no job overflows");
+        assert!(beside_plain.patches.iter().all(|p| !p.is_empty()), "per {per}: beside, the cap touches");
+        let pipe = ContactPipeline::new(g, &model, worlds, &cfg).unwrap();
+        let (listed, first) = frame(&pipe, &overlapping);
+        assert_eq!(listed, 3 * worlds, "per {per}: every job overflows");
+        // Flagged: listed again (straight to the evicting pass), the same patches.
+        let (listed, again) = frame(&pipe, &overlapping);
+        assert_eq!(listed, 3 * worlds, "per {per}: flagged jobs");
+        assert_eq!(again, first, "per {per}: a flagged job's patches");
+        // Still flagged beside: an evicting run that evicts nothing gives the plain run's patches.
+        let (listed, beside_flagged) = frame(&pipe, &beside);
+        assert_eq!(listed, 3 * worlds, "per {per}: still flagged");
+        assert_eq!(beside_flagged, beside_plain, "per {per}: beside, after evicting runs");
+        // ... and cleared the flags: the plain pass takes the jobs again.
+        let (listed, beside_again) = frame(&pipe, &beside);
+        assert_eq!(listed, 0, "per {per}: flags cleared");
+        assert_eq!(beside_again, beside_plain, "per {per}: beside, plain again");
     }
 }

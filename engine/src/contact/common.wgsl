@@ -171,8 +171,8 @@ var<workgroup> wg_victim: atomic<u32>; // eviction arg-min key, NONE between evi
 // Per invocation (workgroup-uniform): FindDeepest rounds so far (wg_best's parity runs on across batches,
 // so a batch's last round leaves the buffer of the next batch's first round zeroed).
 var<private> red_round: u32;
-// Set by reduce_batch without eviction when the budget is full and candidates are left (generate.wgsl
-// then hands the job to its retry pass, which evicts).
+// Set by reduce_batch when the budget is full and candidates are left: without eviction the job stops
+// (generate.wgsl then hands it to its retry pass, which evicts); with eviction it says that the job evicted.
 var<private> red_overflow: bool;
 
 // Record of patch p: entry 0 its normal (pd_normal), entries 1-4 its slots (pd_slot); area and slot-0 key
@@ -512,8 +512,8 @@ fn reduce_batch(lid: u32, c: Cands, pc0: u32, normal_cos: f32, offset: f32, min_
     // Budget full and candidates left: each new patch goes to index MAX_PATCHES; of the existing patches
     // and the new one, the one of least measure goes.
     if (best > IDX_MASK) {
+        red_overflow = true;
         if (!evicting) {
-            red_overflow = true;
             return pc;
         }
         loop {

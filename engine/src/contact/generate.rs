@@ -113,18 +113,23 @@ pub(crate) fn compute_pipeline_with(
 }
 
 /// The generation pipelines: the first pass over every job, without eviction, and the retry pass over the
-/// jobs whose patch budget overflowed (generate.wgsl). The first pass runs as one dispatch per run of
-/// consecutive jobs whose pairs share an SDF kind, each with a pipeline compiled for that kind alone: in one
-/// pipeline for all kinds, lavapipe ran every other kind's sampling, masked, at every descent step (the
-/// Franka Screw scene at 128 worlds: the thread pair's generation 272 ms per frame alone, 381 ms beside
-/// the pads' grid pair, whose own work is a few ms; 2026-12-05). The retry pass, rare, takes every kind.
+/// jobs whose patch budget overflowed, or overflowed last frame and is still flagged (generate.wgsl). The
+/// first pass runs as one dispatch per run of consecutive jobs whose pairs share an SDF kind, each with a
+/// pipeline compiled for that kind alone: in one pipeline for all kinds, lavapipe ran every other kind's
+/// sampling, masked, at every descent step (the Franka Screw scene at 128 worlds: the thread pair's
+/// generation 272 ms per frame alone, 381 ms beside the pads' grid pair, whose own work is a few ms;
+/// 2026-12-05). The retry pass runs per kind too, one indirect dispatch per kind in use.
 pub struct GenerateKernel {
     /// The first pass's pipelines, one per SDF kind (`model.rs` PairGpu::sdf_kind) in `runs`.
     pub first: Vec<(u32, wgpu::ComputePipeline)>,
     /// The first pass's dispatches: (index into `first`, first job, jobs), covering every job in order.
     pub runs: Vec<(usize, u32, u32)>,
-    pub retry: wgpu::ComputePipeline,
+    /// The retry pass's pipelines, one per SDF kind in use (its `RETRY_KIND`), in `first`'s order.
+    pub retry: Vec<(u32, wgpu::ComputePipeline)>,
 }
+
+/// SDF kinds (model.rs PairGpu::sdf_kind 0..4: grid, plane, thread, revolved): generate.wgsl's `KINDS`.
+pub(crate) const SDF_KINDS: u32 = 4;
 
 impl SdfKinds {
     /// The one kind `kind` (0 grid, 1 plane, 2 thread, 3 revolved).
@@ -170,29 +175,33 @@ impl GenerateKernel {
                 _ => runs.push((p, j as u32, 1)),
             }
         }
-        GenerateKernel {
-            first,
-            runs,
-            retry: compute_pipeline_with(
-                device,
-                "contact-generate-retry",
-                &source(SdfKinds::of(&flat.pairs)),
-                "generate_retry",
-                &constants,
-            ),
-        }
+        let retry = first
+            .iter()
+            .map(|&(kind, _)| {
+                let constants = [constants[0], ("RETRY_KIND", kind as f64)];
+                let pipeline = compute_pipeline_with(
+                    device,
+                    "contact-generate-retry",
+                    &source(SdfKinds::only(kind)),
+                    "generate_retry",
+                    &constants,
+                );
+                (kind, pipeline)
+            })
+            .collect();
+        GenerateKernel { first, runs, retry }
     }
 
     /// Records both passes: the first pass's runs, `groups[r]` binding run r (its group 0 holds the
-    /// parameters with the run's first job), each over `world_count` worlds, then the retry pass's indirect
-    /// dispatch from `retry_args`. The first pass's group 2 holds the retry list and `retry_args`;
-    /// `retry_groups` bind the retry pass (group 2 with the retry list only: `retry_args` is its dispatch
-    /// size).
+    /// parameters with the run's first job), each over `world_count` worlds, then per kind in use the
+    /// retry pass's indirect dispatch from its words of `retry_args`. The first pass's group 2 holds the
+    /// retry lists and `retry_args`; `retry_groups[k]` bind `retry[k]` (group 2 with the retry lists only:
+    /// `retry_args` is its dispatch size).
     pub fn dispatch(
         &self,
         pass: &mut wgpu::ComputePass,
         groups: &[[wgpu::BindGroup; 3]],
-        retry_groups: [&wgpu::BindGroup; 3],
+        retry_groups: &[[wgpu::BindGroup; 3]],
         retry_args: &wgpu::Buffer,
         world_count: u32,
     ) {
@@ -200,27 +209,33 @@ impl GenerateKernel {
             let [a, b, c] = g;
             dispatch_compute(pass, &self.first[p].1, [a, b, c], jobs, world_count);
         }
-        bind_compute(pass, &self.retry, retry_groups);
-        pass.dispatch_workgroups_indirect(retry_args, 0);
+        for ((kind, pipeline), [a, b, c]) in self.retry.iter().zip(retry_groups) {
+            bind_compute(pass, pipeline, [a, b, c]);
+            pass.dispatch_workgroups_indirect(retry_args, 12 * *kind as u64);
+        }
     }
 }
 
-/// Buffers of generate.wgsl's retry pass for `job_count` jobs in `world_count` worlds: the job list (a
-/// count and a (job, world) pair per job) and the indirect dispatch size; [`clear_retry`] zeroes both's
-/// counters.
+/// Buffers of generate.wgsl's retry pass for `job_count` jobs in `world_count` worlds: `retry_jobs` (per
+/// SDF kind a listed-job count; the sticky eviction flags, one per (world, job); per kind a list of (job,
+/// world) pairs with room for every job) and `retry_args` (per kind an indirect dispatch size).
+/// [`clear_retry`] zeroes the counts and dispatch sizes; the flags persist across frames.
 pub(crate) fn retry_buffers(
     gpu: &crate::gpu::GpuContext,
     job_count: u32,
     world_count: u32,
 ) -> (wgpu::Buffer, wgpu::Buffer) {
-    let jobs = gpu.storage_buffer_zeroed("retry_jobs", 4 * (1 + 2 * job_count as u64 * world_count as u64));
-    let args = gpu.storage_buffer("retry_args", &[0u32; 3], wgpu::BufferUsages::INDIRECT);
+    let jw = job_count as u64 * world_count as u64;
+    let words = SDF_KINDS as u64 + jw * (1 + 2 * SDF_KINDS as u64);
+    let jobs = gpu.storage_buffer_zeroed("retry_jobs", 4 * words);
+    let args = gpu.storage_buffer("retry_args", &[0u32; 3 * SDF_KINDS as usize], wgpu::BufferUsages::INDIRECT);
     (jobs, args)
 }
 
-/// Records the clearing of the retry pass's counters (before each frame's generate pass).
+/// Records the clearing of the retry pass's counters (before each frame's generate pass); the sticky
+/// eviction flags stay.
 pub(crate) fn clear_retry(encoder: &mut wgpu::CommandEncoder, retry_jobs: &wgpu::Buffer, retry_args: &wgpu::Buffer) {
-    encoder.clear_buffer(retry_jobs, 0, Some(4));
+    encoder.clear_buffer(retry_jobs, 0, Some(4 * SDF_KINDS as u64));
     encoder.clear_buffer(retry_args, 0, None);
 }
 

@@ -158,7 +158,7 @@ fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: T
             }
         }
         pc = reduce_batch(lid, cs, pc, params.normal_cos, offset, pair.min_separation, evicting);
-        if (red_overflow) {
+        if (!evicting && red_overflow) {
             return vec2<u32>(NONE, 0u);
         }
         base += BATCH;

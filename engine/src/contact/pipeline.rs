@@ -96,9 +96,11 @@ pub struct ContactPipeline {
     normals_groups: [wgpu::BindGroup; 3],
     /// The first generate pass's bind groups, per run of jobs of one SDF kind (GenerateKernel::runs).
     gen_groups: Vec<[wgpu::BindGroup; 3]>,
-    /// The retry pass's bind groups (generate.wgsl; automatic layouts belong to one pipeline).
-    retry_groups: [wgpu::BindGroup; 3],
-    /// Jobs whose patch budget overflowed in the first generate pass: a count, then (job, world) per job.
+    /// The retry passes' bind groups, per kind in use (generate.wgsl; automatic layouts belong to one
+    /// pipeline).
+    retry_groups: Vec<[wgpu::BindGroup; 3]>,
+    /// Jobs listed for the evicting pass (overflowed in the first pass, or flagged since an earlier frame),
+    /// per SDF kind, and the sticky eviction flags (layout: generate.wgsl).
     pub retry_jobs: wgpu::Buffer,
     /// The retry pass's indirect dispatch size.
     retry_args: wgpu::Buffer,
@@ -231,12 +233,17 @@ impl ContactPipeline {
                 ]
             })
             .collect();
-        let rp = &generate.retry;
-        let retry_groups = [
-            group(rp, 0, &[&uniform, &pairs, &jobs, &tri_verts, &sdf_values]),
-            group(rp, 1, &[&body_q]),
-            group(rp, 2, &[&job_patches, &job_patch_count, &pair_candidates, &retry_jobs]),
-        ];
+        let retry_groups = generate
+            .retry
+            .iter()
+            .map(|(_, rp)| {
+                [
+                    group(rp, 0, &[&uniform, &pairs, &jobs, &tri_verts, &sdf_values]),
+                    group(rp, 1, &[&body_q]),
+                    group(rp, 2, &[&job_patches, &job_patch_count, &pair_candidates, &retry_jobs]),
+                ]
+            })
+            .collect();
         let merge = merges.then(|| {
             let merge = MergeKernel::new(dev, cfg, subgroups);
             let mp = &merge.pipeline;
@@ -295,16 +302,17 @@ impl ContactPipeline {
         super::generate::clear_retry(encoder, &self.retry_jobs, &self.retry_args);
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("contacts"), timestamp_writes: None });
-        self.generate.dispatch(
-            &mut pass,
-            &self.gen_groups,
-            refs(&self.retry_groups),
-            &self.retry_args,
-            self.world_count,
-        );
+        self.generate.dispatch(&mut pass, &self.gen_groups, &self.retry_groups, &self.retry_args, self.world_count);
         if let Some((merge, groups)) = &self.merge {
             merge.dispatch(&mut pass, refs(groups), self.flat.pairs.len() as u32, self.world_count);
         }
+    }
+
+    /// Jobs the last frame's evicting pass redid, all kinds together (reads back; waits for the GPU):
+    /// those whose patch budget overflowed in the first pass and those still flagged from an earlier frame.
+    pub fn retried_jobs(&self, gpu: &GpuContext) -> u32 {
+        let counts: Vec<u32> = gpu.read_buffer_prefix(&self.retry_jobs, 4 * super::generate::SDF_KINDS as u64);
+        counts.iter().sum()
     }
 
     /// Encodes and submits one frame.
