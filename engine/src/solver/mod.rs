@@ -1073,13 +1073,19 @@ fn solve_patch_block(ctx: &Step, patch: &mut [Row], block: &PatchBlock, vel: &mu
             let new = (r.lambda_n + dn).max(0.0);
             let d = new - r.lambda_n;
             patch[i].lambda_n = new;
-            push(&mut rel, &mut moved, 3 * i, d);
+            // Zero updates skipped, as in solve_row.
+            if d != 0.0 {
+                push(&mut rel, &mut moved, 3 * i, d);
+            }
             if mu > 0.0 {
                 let limit = if cfg.friction_per_patch {
                     mu * patch.iter().map(|o| o.lambda_n).sum::<f32>() / len.max(1) as f32
                 } else {
                     mu * new
                 };
+                if limit == 0.0 && patch[i].lambda_t == [0.0; 2] {
+                    continue;
+                }
                 for j in 0..2 {
                     if k[1 + j] <= 0.0 {
                         continue;
@@ -1088,7 +1094,9 @@ fn solve_patch_block(ctx: &Step, patch: &mut [Row], block: &PatchBlock, vel: &mu
                     let old = patch[i].lambda_t[j];
                     let new = (old + dt).clamp(-limit, limit);
                     patch[i].lambda_t[j] = new;
-                    push(&mut rel, &mut moved, 3 * i + 1 + j, new - old);
+                    if new != old {
+                        push(&mut rel, &mut moved, 3 * i + 1 + j, new - old);
+                    }
                 }
             }
         }
@@ -1114,55 +1122,23 @@ fn solve_row(
     bias: bool,
     resample: bool,
 ) {
+    if (resample || patch[i].cache.is_none()) && !prepare_row(ctx, &mut patch[i], pos, resample) {
+        return;
+    }
     let (cfg, h) = (ctx.cfg, ctx.h);
     let pooled = cfg.friction_per_patch;
     let len = patch.len();
     // The row and its patch's other rows, so the cache is read in place while the row's impulses change.
     let (before, rest) = patch.split_at_mut(i);
     let (r, after) = rest.split_first_mut().expect("row index within its patch");
-    let ((pa, qa), (pb, qb)) = (pos[r.a], pos[r.b]);
-    let pair = &ctx.flat.pairs[r.pair];
-    let x = pa + qa * r.anchor_a;
-    let (n, s) = if resample {
-        // The SDF shape's frame: body b's pose times the shape's pose on it.
-        let body_b = Xf { p: pb, q: Vec4::from(qb) };
-        let shape_b = body_b
-            .mul(&Xf { p: Vec3::new(pair.b_pos[0], pair.b_pos[1], pair.b_pos[2]), q: Vec4::from_array(pair.b_rot) });
-        let (phi, g) = sdf_sample_cpu(pair, &ctx.flat.sdf_values, shape_b.inv().point(x));
-        let glen = g.length();
-        if glen <= 0.0 {
-            r.normal = None;
-            return;
-        }
-        let n = shape_b.rotate(g / glen);
-        r.normal = Some(n);
-        r.sep = phi - pair.radius - cfg.rest_offset;
-        r.cache = None;
-        (n, r.sep)
-    } else {
-        match r.normal {
-            Some(n) => (n, r.sep),
-            None => return,
-        }
-    };
-    if r.cache.is_none() {
-        let lever = ctx.lever(r, pos, n);
-        let t1 = n.any_orthonormal_vector();
-        let t2 = n.cross(t1);
-        let k = [ctx.eff(r, &lever, n), ctx.eff(r, &lever, t1), ctx.eff(r, &lever, t2)];
-        let mut link = ctx
-            .link_dir(r, &lever, n)
-            .and_then(|dn| Some([dn, ctx.link_dir(r, &lever, t1)?, ctx.link_dir(r, &lever, t2)?]));
-        for (dir, k) in link.iter_mut().flatten().zip(k) {
-            dir.mass = if k > 0.0 { 1.0 / k } else { 0.0 };
-        }
-        r.cache = Some(RowCache { lever, tangents: [t1, t2], k, link });
-    }
-    let Some(c) = r.cache.as_ref() else { return };
-    let l = c.lever;
-    let (ra, rb) = (l.ra, l.rb);
+    let (Some(n), Some(c)) = (r.normal, r.cache.as_ref()) else { return };
+    let s = r.sep;
     let (a, b) = (r.a, r.b);
-    let rel = |vel: &Vels| (vel.v[a][0] + vel.v[a][1].cross(ra)) - (vel.v[b][0] + vel.v[b][1].cross(rb));
+    // The lever form's relative velocity (rows without LinkDirs), reading the cache in place.
+    let rel = |vel: &Vels| {
+        let l = &c.lever;
+        (vel.v[a][0] + vel.v[a][1].cross(l.ra)) - (vel.v[b][0] + vel.v[b][1].cross(l.rb))
+    };
     let k = c.k[0];
     if k <= 0.0 {
         return;
@@ -1182,9 +1158,13 @@ fn solve_row(
     let new = (r.lambda_n + dn).max(0.0);
     let d = new - r.lambda_n;
     r.lambda_n = new;
-    match &c.link {
-        Some(dirs) => dirs[0].apply(vel, d),
-        None => ctx.apply(r, &l, vel, n * d),
+    // Most rows within the contact offset stay separated and take no impulse (the Franka's nut on the
+    // thread: 13 of ~200 rows pushing): an update of zero moves nothing, so it is skipped, here and below.
+    if d != 0.0 {
+        match &c.link {
+            Some(dirs) => dirs[0].apply(vel, d),
+            None => ctx.apply(r, &c.lever, vel, n * d),
+        }
     }
     let mu = r.mu;
     if mu > 0.0 {
@@ -1195,24 +1175,78 @@ fn solve_row(
         } else {
             mu * r.lambda_n
         };
-        for (j, t) in c.tangents.into_iter().enumerate() {
+        // No friction to give and none held: the clamp would leave both tangents at zero.
+        if limit == 0.0 && r.lambda_t == [0.0; 2] {
+            return;
+        }
+        for j in 0..2 {
             let kt = c.k[1 + j];
             if kt <= 0.0 {
                 continue;
             }
             let dt = match &c.link {
                 Some(dirs) => -dirs[1 + j].rel(vel, a, b) * dirs[1 + j].mass,
-                None => -rel(vel).dot(t) / kt,
+                None => -rel(vel).dot(c.tangents[j]) / kt,
             };
             let new = (r.lambda_t[j] + dt).clamp(-limit, limit);
             let d = new - r.lambda_t[j];
             r.lambda_t[j] = new;
-            match &c.link {
-                Some(dirs) => dirs[1 + j].apply(vel, d),
-                None => ctx.apply(r, &l, vel, t * d),
+            if d != 0.0 {
+                match &c.link {
+                    Some(dirs) => dirs[1 + j].apply(vel, d),
+                    None => ctx.apply(r, &c.lever, vel, c.tangents[j] * d),
+                }
             }
         }
     }
+}
+
+/// A row's sample (with `resample`: its normal and separation at the current poses) and its cache
+/// ([`RowCache`]), built where missing. Out of line: a sweep reuses both, and with this inlined the
+/// sweep's update copied the cache through the stack (a third of the solve in store-forwarding stalls,
+/// perf 2026-12-05). False where the row has no normal (the SDF had no gradient there).
+#[inline(never)]
+fn prepare_row(ctx: &Step, r: &mut Row, pos: &[(Vec3, Quat)], resample: bool) -> bool {
+    let cfg = ctx.cfg;
+    let n = if resample {
+        let ((pa, qa), (pb, qb)) = (pos[r.a], pos[r.b]);
+        let pair = &ctx.flat.pairs[r.pair];
+        let x = pa + qa * r.anchor_a;
+        // The SDF shape's frame: body b's pose times the shape's pose on it.
+        let body_b = Xf { p: pb, q: Vec4::from(qb) };
+        let shape_b = body_b
+            .mul(&Xf { p: Vec3::new(pair.b_pos[0], pair.b_pos[1], pair.b_pos[2]), q: Vec4::from_array(pair.b_rot) });
+        let (phi, g) = sdf_sample_cpu(pair, &ctx.flat.sdf_values, shape_b.inv().point(x));
+        let glen = g.length();
+        if glen <= 0.0 {
+            r.normal = None;
+            return false;
+        }
+        let n = shape_b.rotate(g / glen);
+        r.normal = Some(n);
+        r.sep = phi - pair.radius - cfg.rest_offset;
+        r.cache = None;
+        n
+    } else {
+        match r.normal {
+            Some(n) => n,
+            None => return false,
+        }
+    };
+    if r.cache.is_none() {
+        let lever = ctx.lever(r, pos, n);
+        let t1 = n.any_orthonormal_vector();
+        let t2 = n.cross(t1);
+        let k = [ctx.eff(r, &lever, n), ctx.eff(r, &lever, t1), ctx.eff(r, &lever, t2)];
+        let mut link = ctx
+            .link_dir(r, &lever, n)
+            .and_then(|dn| Some([dn, ctx.link_dir(r, &lever, t1)?, ctx.link_dir(r, &lever, t2)?]));
+        for (dir, k) in link.iter_mut().flatten().zip(k) {
+            dir.mass = if k > 0.0 { 1.0 / k } else { 0.0 };
+        }
+        r.cache = Some(RowCache { lever, tangents: [t1, t2], k, link });
+    }
+    true
 }
 
 /// Converts a host pose to the kernels' transform (re-exported for callers building states).
