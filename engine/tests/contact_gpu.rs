@@ -415,3 +415,36 @@ fn overflowing_jobs_stay_flagged_until_a_frame_evicts_nothing() {
         assert_eq!(beside_again, beside_plain, "per {per}: beside, plain again");
     }
 }
+
+/// The host solve's read (no per-contact normals pass) gives `read`'s patches, each contact carrying its
+/// patch's normal.
+#[test]
+fn read_for_solver_gives_the_patches_with_their_patch_normals() {
+    let g = gpu();
+    let r = 0.05;
+    let grid = Arc::new(sphere_grid(r, 48));
+    let model = soup_vs_grid(shell_soup(3000, r, 0x9E3779B97F4A7C15), grid);
+    let worlds = 2;
+    let poses = turned_poses(worlds);
+    let pipe = ContactPipeline::new(g, &model, worlds, &ContactConfig { chunk_triangles: 1024, ..Default::default() })
+        .unwrap();
+    pipe.write_body_q(g, &poses);
+    pipe.run(g);
+    let (full, solver) = (pipe.read(g), pipe.read_for_solver(g));
+    assert_eq!(full.candidates, solver.candidates);
+    assert_eq!(full.patches.len(), solver.patches.len());
+    let mut contacts = 0;
+    for (f, s) in full.patches.iter().zip(&solver.patches) {
+        assert_eq!(f.len(), s.len());
+        for (fp, sp) in f.iter().zip(s) {
+            assert_eq!((fp.normal, fp.area), (sp.normal, sp.area));
+            assert_eq!(fp.contacts.len(), sp.contacts.len());
+            for (fc, sc) in fp.contacts.iter().zip(&sp.contacts) {
+                assert_eq!((fc.point, fc.depth), (sc.point, sc.depth));
+                assert_eq!(sc.normal, sp.normal);
+                contacts += 1;
+            }
+        }
+    }
+    assert!(contacts > 100, "{contacts} contacts");
+}

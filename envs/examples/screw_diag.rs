@@ -80,7 +80,9 @@ fn main() {
             let s = e.scene();
             let (np, _) = s.nut_pose(0);
             let pc = s.sim.model.contacts.pairs.len();
-            if let Some(c) = &s.sim.contacts {
+            // Read again for each contact's own normal (the step keeps its patch's), sampled at the poses now.
+            {
+                let c = &s.sim.pipe.read(GpuContext::global().unwrap());
                 for p in (0..pc).filter(|&p| p != s.thread_pair) {
                     println!(
                         "  pair {p} force on the query shape {:?} N",

@@ -56,7 +56,8 @@ pub struct ArticulatedSim {
     pub joints: ArticulationState,
     /// The host solve's warm start (unused while the device solves: its rows stay there).
     pub warm: WarmStart,
-    /// The contacts of the last frame (generated at its start); None while the device solves (see
+    /// The contacts of the last frame (generated at its start), each contact with its patch's normal (the
+    /// solve samples its own; `pipe.read` gives each contact's); None while the device solves (see
     /// [`read_contacts`](Self::read_contacts)).
     pub contacts: Option<ContactsHost>,
     /// Wall time of the last frame's contact handling (generation, reduction and readback) and of its
@@ -196,7 +197,8 @@ impl ArticulatedSim {
         }
     }
 
-    /// The contacts generated at the last frame's start (read back from the device when it solves there).
+    /// The contacts generated at the last frame's start (read back from the device when it solves there,
+    /// with each contact's sampled normal; after a host solve, with its patch's).
     pub fn read_contacts(&self, gpu: &GpuContext) -> ContactsHost {
         match &self.contacts {
             Some(c) => c.clone(),
@@ -216,7 +218,7 @@ impl ArticulatedSim {
         let start = std::time::Instant::now();
         self.pipe.write_body_q(gpu, &self.state.body_q);
         self.pipe.run(gpu);
-        let contacts = self.pipe.read(gpu);
+        let contacts = self.pipe.read_for_solver(gpu);
         let handled = std::time::Instant::now();
         let ok = step_cpu_articulated(
             &self.model.bodies,
