@@ -630,6 +630,8 @@ pub fn step_cpu_articulated_with(
             }
             // Each link patch's Delassus matrix for the substep's sweeps (solve_rows).
             let mut blocks = (sweep == PatchSweep::Block).then(Vec::new);
+            // Each row's normal test for the sweeps (solve_rows), rebuilt with the rows' caches.
+            let mut idle = vec![Idle::default(); rows.len()];
             for _ in 0..cfg.substeps {
                 // The articulation's velocity before contact, and how its links answer impulses this substep.
                 if let (Some(a), Some((q, qd, tau, target)), Some(lp)) =
@@ -670,7 +672,7 @@ pub fn step_cpu_articulated_with(
                 // The poses stand still during the sweeps, so each row's separation and normal are sampled in
                 // the first sweep and reused by the others (sampled again once the bodies have moved).
                 for it in 0..cfg.pos_iters {
-                    solve_rows(&ctx, &mut rows, &pos, &mut vel, true, it == 0, blocks.as_mut());
+                    solve_rows(&ctx, &mut rows, &mut idle, &pos, &mut vel, true, it == 0, blocks.as_mut());
                 }
                 for i in 0..nb {
                     if (ctx.inv_m(i) > 0.0 || model.is_kinematic(i)) && slot[i].is_none() {
@@ -698,7 +700,7 @@ pub fn step_cpu_articulated_with(
                     }
                 }
                 for it in 0..cfg.vel_iters {
-                    solve_rows(&ctx, &mut rows, &pos, &mut vel, false, it == 0, blocks.as_mut());
+                    solve_rows(&ctx, &mut rows, &mut idle, &pos, &mut vel, false, it == 0, blocks.as_mut());
                 }
                 if let (Some((_, qd, _, _)), Some(resp)) = (joints.as_mut(), ctx.links.as_ref()) {
                     resp.apply_impulses(&vel.phi, qd);
@@ -928,9 +930,11 @@ struct Lever {
 /// Gauss-Seidel updates in the same order, on the patch's own Delassus matrix. `blocks` holds those
 /// matrices, one per patch in row order, built at the patch's first block after a resampling sweep (the
 /// caches they come from stand until then); None: every pass row by row ([`PatchSweep::Rows`]).
+#[allow(clippy::too_many_arguments)]
 fn solve_rows(
     ctx: &Step,
     rows: &mut [Row],
+    idle: &mut [Idle],
     pos: &[(Vec3, Quat)],
     vel: &mut Vels,
     bias: bool,
@@ -940,13 +944,17 @@ fn solve_rows(
     if let (true, Some(b)) = (resample, blocks.as_mut()) {
         b.clear();
     }
+    let mut first = 0;
     for (k, patch) in rows.chunk_by_mut(|x, y| (x.pair, x.patch) == (y.pair, y.patch)).enumerate() {
+        let idle = &mut idle[first..first + patch.len()];
+        first += patch.len();
         let link = ctx.slot[patch[0].a].is_some() || ctx.slot[patch[0].b].is_some();
         let passes = if link { ctx.cfg.patch_iters.max(ctx.cfg.link_patch_iters) } else { ctx.cfg.patch_iters };
         let mut pass = 0;
         if resample {
             for i in 0..patch.len() {
                 solve_row(ctx, patch, i, pos, vel, bias, true);
+                idle[i] = Idle::of(ctx, &patch[i]);
             }
             pass = 1;
         }
@@ -964,9 +972,75 @@ fn solve_rows(
         }
         for _ in pass..passes {
             for i in 0..patch.len() {
+                if idle[i].stays(&patch[i], vel, bias) {
+                    continue;
+                }
                 solve_row(ctx, patch, i, pos, vel, bias, false);
             }
         }
+    }
+}
+
+/// What tells a row whether an update leaves it as it is, kept apart from the rows (which are large) so
+/// that a sweep reads it in one cache line: most rows within the contact offset hold no impulse and take
+/// none (the Franka's nut on the thread: ~13 of ~200 rows push), and for them the update is only this
+/// normal test. Its quantities are copies of the row's normal [`LinkDir`] and the speculative targets, so
+/// the test is [`solve_row`]'s own, bitwise. `mass` 0: no test (no LinkDir, or not yet cached).
+#[derive(Clone, Copy, Debug, Default)]
+struct Idle {
+    d: Vec3,
+    jac: [Vec3; 2],
+    mass: f32,
+    /// The normal's target velocity in position sweeps (with bias) and velocity sweeps [m/s].
+    target: [f32; 2],
+    a: u32,
+    b: u32,
+}
+
+impl Idle {
+    /// The test of row `r` as cached now.
+    fn of(ctx: &Step, r: &Row) -> Self {
+        let (Some(_), Some(c)) = (r.normal, r.cache.as_ref()) else { return Idle::default() };
+        let Some(dirs) = c.link.as_ref() else { return Idle::default() };
+        if c.k[0] <= 0.0 {
+            return Idle::default();
+        }
+        let n = &dirs[0];
+        Idle {
+            d: n.d,
+            jac: n.jac,
+            mass: n.mass,
+            target: [normal_target(ctx, r.sep, true), normal_target(ctx, r.sep, false)],
+            a: r.a as u32,
+            b: r.b as u32,
+        }
+    }
+
+    /// Whether [`solve_row`] would leave row `r` unchanged and apply nothing: it holds no impulse, and the
+    /// normal update clamps to zero (then friction has nothing to give).
+    #[inline]
+    fn stays(&self, r: &Row, vel: &Vels, bias: bool) -> bool {
+        if self.mass == 0.0 || r.lambda_n != 0.0 || r.lambda_t != [0.0; 2] {
+            return false;
+        }
+        let (va, vb) = (&vel.v[self.a as usize], &vel.v[self.b as usize]);
+        let rel = (va[0] - vb[0]).dot(self.d) + va[1].dot(self.jac[0]) - vb[1].dot(self.jac[1]);
+        let dn = (self.target[!bias as usize] - rel) * self.mass;
+        // (0 + dn).max(0) is 0 unless dn > 0 (f32::max takes 0 over NaN).
+        !(dn > 0.0)
+    }
+}
+
+/// The normal's target relative velocity [m/s] at separation `s` [m]: speculative when separated, bounded
+/// depenetration when penetrating (position sweeps, `bias`), none otherwise.
+#[inline]
+fn normal_target(ctx: &Step, s: f32, bias: bool) -> f32 {
+    if s > 0.0 {
+        -s / ctx.h
+    } else if bias {
+        (-s / ctx.h).min(ctx.cfg.max_depenetration_velocity)
+    } else {
+        0.0
     }
 }
 
@@ -1030,7 +1104,7 @@ impl PatchBlock {
 /// `link_patch_iters` (8) times per sweep, and each row pass reads two bodies and moves every link body
 /// (a [`LinkDir`] apply); on the 12 x 12 matrix a direction's update is 12 products.
 fn solve_patch_block(ctx: &Step, patch: &mut [Row], block: &PatchBlock, vel: &mut Vels, bias: bool, passes: u32) {
-    let (cfg, h) = (ctx.cfg, ctx.h);
+    let cfg = ctx.cfg;
     let len = patch.len();
     let n_dirs = 3 * len;
     let mut rel = [0.0f32; PATCH_DIRS];
@@ -1060,14 +1134,7 @@ fn solve_patch_block(ctx: &Step, patch: &mut [Row], block: &PatchBlock, vel: &mu
             if c.k[0] <= 0.0 {
                 continue;
             }
-            let s = r.sep;
-            let target = if s > 0.0 {
-                -s / h
-            } else if bias {
-                (-s / h).min(cfg.max_depenetration_velocity)
-            } else {
-                0.0
-            };
+            let target = normal_target(ctx, r.sep, bias);
             let (mu, k, masses) = (r.mu, c.k, [dirs[0].mass, dirs[1].mass, dirs[2].mass]);
             let dn = (target - rel[3 * i]) * masses[0];
             let new = (r.lambda_n + dn).max(0.0);
@@ -1125,7 +1192,7 @@ fn solve_row(
     if (resample || patch[i].cache.is_none()) && !prepare_row(ctx, &mut patch[i], pos, resample) {
         return;
     }
-    let (cfg, h) = (ctx.cfg, ctx.h);
+    let cfg = ctx.cfg;
     let pooled = cfg.friction_per_patch;
     let len = patch.len();
     // The row and its patch's other rows, so the cache is read in place while the row's impulses change.
@@ -1143,14 +1210,7 @@ fn solve_row(
     if k <= 0.0 {
         return;
     }
-    // Normal: speculative when separated, bounded depenetration when penetrating.
-    let target = if s > 0.0 {
-        -s / h
-    } else if bias {
-        (-s / h).min(cfg.max_depenetration_velocity)
-    } else {
-        0.0
-    };
+    let target = normal_target(ctx, s, bias);
     let dn = match &c.link {
         Some(dirs) => (target - dirs[0].rel(vel, a, b)) * dirs[0].mass,
         None => (target - rel(vel).dot(n)) / k,
