@@ -132,6 +132,12 @@ pub struct FrankaNutBoltConfig {
     /// Projected-gradient iterations per nut triangle in contact generation (ContactConfig::iterations;
     /// the engine's default 12).
     pub contact_descent_iters: u32,
+    /// Nut triangles each contact-generation invocation takes per reduction batch
+    /// (ContactConfig::candidates_per_invocation: 1, 2 or 4; default 1, the setting the Screw policy of
+    /// docs/RESULTS.md was trained with). 4 runs a quarter of the reduction's rounds: a trained policy's
+    /// Screw steps 1.23x faster on lavapipe, and that policy (trained at 1) seated 120 of 128 episodes at 4
+    /// against 123 at 1 (docs/BENCHMARKS.md, 2026-12-05); batches in another order keep other contacts.
+    pub contact_candidates_per_invocation: u32,
     /// Start the nut on the bolt's first full thread below the tip's chamfer (engaged) instead of resting
     /// on the tip (IsaacGymEnvs' Screw, the default). Factory's Screw controller acts on z and yaw only, so
     /// only the bolt holds the hand sideways: on a flat-cut tip the nut slid off it (see
@@ -190,6 +196,7 @@ impl Default for FrankaNutBoltConfig {
             bolt_tip_chamfer: true,
             segments_per_turn: 48,
             contact_descent_iters: ContactConfig::default().iterations,
+            contact_candidates_per_invocation: 1,
             far_error: 0.1,
             success_bonus: 0.0,
             failure_penalty: 0.0,
@@ -242,6 +249,12 @@ impl FrankaNutBoltConfig {
         }
         if !(1..=64).contains(&self.contact_descent_iters) {
             return bad("contact_descent_iters", format!("{} is not in 1..=64", self.contact_descent_iters));
+        }
+        if ![1, 2, 4].contains(&self.contact_candidates_per_invocation) {
+            return bad(
+                "contact_candidates_per_invocation",
+                format!("{} is not 1, 2 or 4", self.contact_candidates_per_invocation),
+            );
         }
         if self.segments_per_turn < 8 {
             return bad("segments_per_turn", format!("{} is below 8", self.segments_per_turn));
@@ -443,6 +456,7 @@ impl FrankaNutBolt {
             contact: ContactConfig {
                 chunk_world_count: 128,
                 iterations: cfg.contact_descent_iters,
+                candidates_per_invocation: cfg.contact_candidates_per_invocation,
                 ..ContactConfig::default()
             },
             segments_per_turn: cfg.segments_per_turn,
@@ -950,6 +964,11 @@ mod tests {
             (FrankaNutBoltConfig { contact_descent_iters: 0, ..Default::default() }, "contact_descent_iters", "1..=64"),
             (FrankaNutBoltConfig { grasp_height: 0.02, ..Default::default() }, "grasp_height", "[-0.005, 0.01]"),
             (FrankaNutBoltConfig { segments_per_turn: 4, ..Default::default() }, "segments_per_turn", "below 8"),
+            (
+                FrankaNutBoltConfig { contact_candidates_per_invocation: 3, ..Default::default() },
+                "contact_candidates_per_invocation",
+                "1, 2 or 4",
+            ),
         ];
         for (cfg, field, valid) in cases {
             let e = cfg.check().unwrap_err().to_string();
