@@ -321,6 +321,14 @@ fn assert_patch_sets_match(gp: &[factory_engine::contact::Patch], cp: &[factory_
     assert!(mismatched * 10 <= gp.len(), "{what}: {mismatched} of {} patches differ", gp.len());
 }
 
+/// 3000 seeded triangles in a shell around a sphere's grid SDF of radius `r` (returned): normals everywhere,
+/// so a small patch budget overflows.
+fn shell_soup_vs_sphere() -> (ContactModel, f32) {
+    let r = 0.05;
+    let grid = Arc::new(sphere_grid(r, 48));
+    (soup_vs_grid(shell_soup(3000, r, 0x9E3779B97F4A7C15), grid), r)
+}
+
 /// The generate pass leaves out the reduction's eviction rounds and lists the jobs whose patch budget
 /// overflows; the retry pass redoes those with eviction. On the soup at a budget of 16 every job overflows
 /// and the patches still match the CPU twin (one pass with eviction); at 256 no job overflows and none is
@@ -328,9 +336,7 @@ fn assert_patch_sets_match(gp: &[factory_engine::contact::Patch], cp: &[factory_
 #[test]
 fn jobs_that_overflow_their_patch_budget_are_redone_with_eviction() {
     let g = gpu();
-    let r = 0.05;
-    let grid = Arc::new(sphere_grid(r, 48));
-    let model = soup_vs_grid(shell_soup(3000, r, 0x9E3779B97F4A7C15), grid);
+    let (model, _) = shell_soup_vs_sphere();
     let worlds = 3;
     let poses = turned_poses(worlds);
     // (A budget of 256 with batches of 256 needs more than lavapipe's 32 KiB of workgroup memory.)
@@ -364,9 +370,7 @@ fn jobs_that_overflow_their_patch_budget_are_redone_with_eviction() {
 #[test]
 fn overflowing_jobs_stay_flagged_until_a_frame_evicts_nothing() {
     let g = gpu();
-    let r = 0.05;
-    let grid = Arc::new(sphere_grid(r, 48));
-    let model = soup_vs_grid(shell_soup(3000, r, 0x9E3779B97F4A7C15), grid);
+    let (model, r) = shell_soup_vs_sphere();
     let worlds = 3;
     let overlapping = turned_poses(worlds);
     // The soup's shell beside the sphere, touching it at one point: a small cap of normals, few patches.
@@ -421,9 +425,7 @@ fn overflowing_jobs_stay_flagged_until_a_frame_evicts_nothing() {
 #[test]
 fn read_for_solver_gives_the_patches_with_their_patch_normals() {
     let g = gpu();
-    let r = 0.05;
-    let grid = Arc::new(sphere_grid(r, 48));
-    let model = soup_vs_grid(shell_soup(3000, r, 0x9E3779B97F4A7C15), grid);
+    let (model, _) = shell_soup_vs_sphere();
     let worlds = 2;
     let poses = turned_poses(worlds);
     let pipe = ContactPipeline::new(g, &model, worlds, &ContactConfig { chunk_triangles: 1024, ..Default::default() })

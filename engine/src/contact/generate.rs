@@ -152,6 +152,10 @@ impl GenerateKernel {
             )
         };
         let constants = [("INTERLEAVED_DESCENT", if cfg.interleaved_descent { 1.0 } else { 0.0 })];
+        // A pipeline of `entry` compiled for SDF kind `kind` alone.
+        let for_kind = |kind: u32, label: &str, entry: &str, constants: &[(&str, f64)]| {
+            compute_pipeline_with(device, label, &source(SdfKinds::only(kind)), entry, constants)
+        };
         let mut first: Vec<(u32, wgpu::ComputePipeline)> = Vec::new();
         let mut runs: Vec<(usize, u32, u32)> = Vec::new();
         for (j, job) in flat.jobs.iter().enumerate() {
@@ -159,14 +163,7 @@ impl GenerateKernel {
             let p = match first.iter().position(|(k, _)| *k == kind) {
                 Some(p) => p,
                 None => {
-                    let pipeline = compute_pipeline_with(
-                        device,
-                        "contact-generate",
-                        &source(SdfKinds::only(kind)),
-                        "generate",
-                        &constants,
-                    );
-                    first.push((kind, pipeline));
+                    first.push((kind, for_kind(kind, "contact-generate", "generate", &constants)));
                     first.len() - 1
                 }
             };
@@ -179,14 +176,7 @@ impl GenerateKernel {
             .iter()
             .map(|&(kind, _)| {
                 let constants = [constants[0], ("RETRY_KIND", kind as f64)];
-                let pipeline = compute_pipeline_with(
-                    device,
-                    "contact-generate-retry",
-                    &source(SdfKinds::only(kind)),
-                    "generate_retry",
-                    &constants,
-                );
-                (kind, pipeline)
+                (kind, for_kind(kind, "contact-generate-retry", "generate_retry", &constants))
             })
             .collect();
         GenerateKernel { first, runs, retry }

@@ -42,7 +42,7 @@ struct Job {
 @group(2) @binding(0) var<storage, read_write> job_patches: array<PatchOut>;
 @group(2) @binding(1) var<storage, read_write> job_patch_count: array<u32>;
 @group(2) @binding(2) var<storage, read_write> pair_candidates: array<atomic<u32>>;
-// Word 0: jobs listed; then (job, world) per listed job.
+// The retry lists and the sticky flags (layout above).
 @group(2) @binding(3) var<storage, read_write> retry_jobs: array<atomic<u32>>;
 @group(2) @binding(4) var<storage, read_write> retry_args: array<atomic<u32>>;
 

@@ -1000,6 +1000,10 @@ struct Idle {
 impl Idle {
     /// The test of row `r` as cached now.
     fn of(ctx: &Step, r: &Row) -> Self {
+        // With friction pooled over the patch a row without normal impulse may still take friction.
+        if ctx.cfg.friction_per_patch {
+            return Idle::default();
+        }
         let (Some(_), Some(c)) = (r.normal, r.cache.as_ref()) else { return Idle::default() };
         let Some(dirs) = c.link.as_ref() else { return Idle::default() };
         if c.k[0] <= 0.0 {
@@ -1017,7 +1021,8 @@ impl Idle {
     }
 
     /// Whether [`solve_row`] would leave row `r` unchanged and apply nothing: it holds no impulse, and the
-    /// normal update clamps to zero (then friction has nothing to give).
+    /// normal update clamps to zero (then friction, limited by the row's own normal impulse, has nothing to
+    /// give).
     #[inline]
     fn stays(&self, r: &Row, vel: &Vels, bias: bool) -> bool {
         if self.mass == 0.0 || r.lambda_n != 0.0 || r.lambda_t != [0.0; 2] {
