@@ -299,8 +299,7 @@ impl LinkDir {
     /// The relative velocity of row sides `a` and `b` along the direction [m/s].
     #[inline]
     fn rel(&self, vel: &Vels, a: usize, b: usize) -> f32 {
-        let (va, vb) = (&vel.v[a], &vel.v[b]);
-        (va[0] - vb[0]).dot(self.d) + va[1].dot(self.jac[0]) - vb[1].dot(self.jac[1])
+        dir_rel(self.d, &self.jac, vel, a, b)
     }
 
     /// Applies `x` [N s] along the direction: the bodies' twists and the slots' spatial impulses.
@@ -317,6 +316,14 @@ impl LinkDir {
             p[1] += phi[1] * x;
         }
     }
+}
+
+/// The relative velocity of row sides `a` and `b` along direction `d` with angular Jacobians `jac` [m/s]
+/// ([`LinkDir::rel`], and [`Idle`]'s copy of the normal's, so that both test alike bitwise).
+#[inline]
+fn dir_rel(d: Vec3, jac: &[Vec3; 2], vel: &Vels, a: usize, b: usize) -> f32 {
+    let (va, vb) = (&vel.v[a], &vel.v[b]);
+    (va[0] - vb[0]).dot(d) + va[1].dot(jac[0]) - vb[1].dot(jac[1])
 }
 
 /// Warm-start match (solver.wgsl's WARM_DISTANCE, WARM_COS): a row takes over the impulses of the row in
@@ -1028,8 +1035,7 @@ impl Idle {
         if self.mass == 0.0 || r.lambda_n != 0.0 || r.lambda_t != [0.0; 2] {
             return false;
         }
-        let (va, vb) = (&vel.v[self.a as usize], &vel.v[self.b as usize]);
-        let rel = (va[0] - vb[0]).dot(self.d) + va[1].dot(self.jac[0]) - vb[1].dot(self.jac[1]);
+        let rel = dir_rel(self.d, &self.jac, vel, self.a as usize, self.b as usize);
         let dn = (self.target[!bias as usize] - rel) * self.mass;
         // (0 + dn).max(0) is 0 unless dn > 0 (f32::max takes 0 over NaN).
         !(dn > 0.0)

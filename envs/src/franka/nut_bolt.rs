@@ -210,6 +210,18 @@ impl Default for FrankaNutBoltConfig {
 }
 
 impl FrankaNutBoltConfig {
+    /// The contact settings of the scene.
+    fn contact_config(&self) -> ContactConfig {
+        // One split of the contact jobs for every batch size, so a world's physics (and an evaluation with
+        // any `--envs`) is that of training at 128 worlds (tests/franka_screw.rs).
+        ContactConfig {
+            chunk_world_count: 128,
+            iterations: self.contact_descent_iters,
+            candidates_per_invocation: self.contact_candidates_per_invocation,
+            ..ContactConfig::default()
+        }
+    }
+
     fn check(&self) -> Result<()> {
         let bad = |field: &'static str, reason: String| Err(EnvError::InvalidValue { field, reason });
         if !(self.dt.is_finite() && self.dt > 0.0) {
@@ -250,11 +262,14 @@ impl FrankaNutBoltConfig {
         if !(1..=64).contains(&self.contact_descent_iters) {
             return bad("contact_descent_iters", format!("{} is not in 1..=64", self.contact_descent_iters));
         }
-        if ![1, 2, 4].contains(&self.contact_candidates_per_invocation) {
-            return bad(
-                "contact_candidates_per_invocation",
-                format!("{} is not 1, 2 or 4", self.contact_candidates_per_invocation),
-            );
+        // The engine's own rules for the contact settings, under this config's names.
+        if let Err(factory_engine::EngineError::Config { field, value, expected }) = self.contact_config().validate() {
+            let field = match field {
+                "iterations" => "contact_descent_iters",
+                "candidates_per_invocation" => "contact_candidates_per_invocation",
+                other => other,
+            };
+            return bad(field, format!("{value} is not {expected}"));
         }
         if self.segments_per_turn < 8 {
             return bad("segments_per_turn", format!("{} is below 8", self.segments_per_turn));
@@ -451,14 +466,7 @@ impl FrankaNutBolt {
         let scene_cfg = SceneConfig {
             worlds: env_count as u32,
             solver,
-            // One split of the contact jobs for every batch size, so a world's physics (and an evaluation
-            // with any `--envs`) is that of training at 128 worlds (tests/franka_screw.rs).
-            contact: ContactConfig {
-                chunk_world_count: 128,
-                iterations: cfg.contact_descent_iters,
-                candidates_per_invocation: cfg.contact_candidates_per_invocation,
-                ..ContactConfig::default()
-            },
+            contact: cfg.contact_config(),
             segments_per_turn: cfg.segments_per_turn,
             thread_mu: cfg.thread_mu,
             base: BASE,
