@@ -44,17 +44,18 @@ impl EnvConfig {
             None => Err(EnvError::Parse(format!("no `type`; valid types: {}", NAMES.join(", ")))),
             Some(t) if !NAMES.contains(&t.as_str()) => Err(EnvError::UnknownType(t)),
             Some(t) => value.clone().try_into().map_err(|e: toml::de::Error| {
-                // The tagged enum's error does not say which key; parsing the variant's own table as text
-                // does (with the line and the key).
+                // The tagged enum's error does not say which key; deserialising the variant's own table does
+                // (the key, and for a nested one its path). From the parsed table, not from its text: a text
+                // rendered again would carry line numbers that are not the config file's.
                 let mut table = value.as_table().cloned().unwrap_or_default();
                 table.remove("type");
-                let text = toml::to_string(&table).unwrap_or_default();
+                let table = toml::Value::Table(table);
                 let detail = match t.as_str() {
-                    "point_mass" => toml::from_str::<PointMassConfig>(&text).err(),
-                    "franka_nut_bolt" => toml::from_str::<FrankaNutBoltConfig>(&text).err(),
+                    "point_mass" => table.try_into::<PointMassConfig>().err(),
+                    "franka_nut_bolt" => table.try_into::<FrankaNutBoltConfig>().err(),
                     _ => None,
                 };
-                EnvError::Parse(detail.map_or_else(|| e.to_string(), |d| d.to_string()))
+                EnvError::Parse(detail.map_or_else(|| e.to_string(), |d| d.to_string().trim_end().to_owned()))
             }),
         }
     }
@@ -125,6 +126,23 @@ mod tests {
         let v: toml::Value = toml::from_str("type = \"point_mass\"\ngoal_radiu = 0.1").unwrap();
         let e = EnvConfig::from_toml(v).unwrap_err().to_string();
         assert!(e.contains("goal_radiu") && e.contains("goal_radius"), "{e}");
+    }
+
+    /// Regression: the error quoted `line 12` of a table rendered again from the parsed config, while the
+    /// key stood on line 13 of the user's file.
+    #[test]
+    fn unknown_key_error_quotes_no_line_of_another_text() {
+        let text = "type = \"franka_nut_bolt\"\n# a comment\n\nsubstep = 3\n";
+        let e = EnvConfig::from_toml(toml::from_str(text).unwrap()).unwrap_err().to_string();
+        assert!(e.contains("`substep`") && e.contains("`substeps`"), "{e}");
+        assert!(!e.contains("line"), "{e}");
+    }
+
+    #[test]
+    fn wrong_type_in_a_nested_table_names_its_path() {
+        let text = "type = \"franka_nut_bolt\"\n[randomize]\nhand_angle_deg = \"wide\"\n";
+        let e = EnvConfig::from_toml(toml::from_str(text).unwrap()).unwrap_err().to_string();
+        assert!(e.contains("randomize.hand_angle_deg"), "{e}");
     }
 
     #[test]

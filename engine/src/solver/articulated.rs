@@ -35,7 +35,8 @@
 //! ms with the sweeps visiting only the pairs with patches (every pass over an empty pair ran a rigid and
 //! a link pass, masked). The rigid-only passes alone took 25 ms before the last change.
 
-use super::gpu::{bodies_gpu, control_range, rows_offset, solver_constants, solver_params, write_wrenches};
+use super::gpu::write_wrenches;
+use super::gpu::{bodies_gpu, clear_world_rows, control_range, rows_offset, solver_constants, solver_params};
 use super::gpu::{BodyGpu, ROW_VEC4, SOLVER_WG};
 use super::{BodyModel, BodyState, Control, SolverConfig};
 use crate::articulation::gpu::{
@@ -448,15 +449,7 @@ impl GpuArticulatedSolver {
     /// belong to contacts that no longer exist); [`super::WarmStart::clear_world`] on the CPU.
     pub fn forget_world(&self, gpu: &GpuContext, world: u32) {
         assert!(world < self.world_count, "world {world} of {}", self.world_count);
-        let rows = self.max_rows as u64 * ROW_VEC4 * 16;
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        enc.clear_buffer(&self.scratch, world as u64 * 16, Some(16));
-        enc.clear_buffer(
-            &self.scratch,
-            rows_offset(self.world_count, self.body_count) + world as u64 * rows,
-            Some(rows),
-        );
-        gpu.queue.submit([enc.finish()]);
+        clear_world_rows(gpu, &self.scratch, (self.world_count, self.body_count, self.max_rows), world);
     }
 
     /// Sets the body wrenches and the joint torques and drive targets held over the following steps, as

@@ -193,6 +193,18 @@ pub(crate) fn rows_offset(world_count: u32, body_count: u32) -> u64 {
     world_count as u64 * (1 + 2 * body_count as u64) * 16
 }
 
+/// Clears world `world`'s status and warm-start rows in a solver scratch buffer (laid out as
+/// [`rows_offset`] says, `max_rows` rows per world): after a reset, last frame's impulses belong to contacts
+/// that no longer exist.
+pub(crate) fn clear_world_rows(gpu: &GpuContext, scratch: &wgpu::Buffer, counts: (u32, u32, u32), world: u32) {
+    let (world_count, body_count, max_rows) = counts;
+    let rows = max_rows as u64 * ROW_VEC4 * 16;
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    enc.clear_buffer(scratch, world as u64 * 16, Some(16));
+    enc.clear_buffer(scratch, rows_offset(world_count, body_count) + world as u64 * rows, Some(rows));
+    gpu.queue.submit([enc.finish()]);
+}
+
 /// Writes `control`'s wrenches into `scratch` at `(offset, size)` (an empty control clears them).
 pub(crate) fn write_wrenches(gpu: &GpuContext, scratch: &wgpu::Buffer, (offset, size): (u64, u64), control: &Control) {
     if control.body_f.is_empty() {
@@ -353,15 +365,7 @@ impl GpuSolver {
         let n = self.body_count as usize;
         assert!(body_q.len() == n && body_qd.len() == n, "one world's bodies: shape [body_count = {n}]");
         write_world_bodies(gpu, &contacts.body_q, &self.body_qd, world, body_q, body_qd);
-        let rows = self.max_rows as u64 * ROW_VEC4 * 16;
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        enc.clear_buffer(&self.scratch, world as u64 * 16, Some(16));
-        enc.clear_buffer(
-            &self.scratch,
-            rows_offset(self.world_count, self.body_count) + world as u64 * rows,
-            Some(rows),
-        );
-        gpu.queue.submit([enc.finish()]);
+        clear_world_rows(gpu, &self.scratch, (self.world_count, self.body_count, self.max_rows), world);
     }
 
     fn control_range(&self) -> (u64, u64) {
