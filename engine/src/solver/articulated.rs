@@ -35,8 +35,9 @@
 //! ms with the sweeps visiting only the pairs with patches (every pass over an empty pair ran a rigid and
 //! a link pass, masked). The rigid-only passes alone took 25 ms before the last change.
 
-use super::gpu::write_wrenches;
-use super::gpu::{bodies_gpu, clear_world_rows, control_range, rows_offset, solver_constants, solver_params};
+use super::gpu::{
+    bodies_gpu, clear_world_rows, control_range, rows_offset, solver_constants, solver_params, write_wrenches,
+};
 use super::gpu::{BodyGpu, ROW_VEC4, SOLVER_WG};
 use super::{BodyModel, BodyState, Control, SolverConfig};
 use crate::articulation::gpu::{

@@ -262,14 +262,19 @@ impl FrankaNutBoltConfig {
         if !(1..=64).contains(&self.contact_descent_iters) {
             return bad("contact_descent_iters", format!("{} is not in 1..=64", self.contact_descent_iters));
         }
-        // The engine's own rules for the contact settings, under this config's names.
-        if let Err(factory_engine::EngineError::Config { field, value, expected }) = self.contact_config().validate() {
-            let field = match field {
-                "iterations" => "contact_descent_iters",
-                "candidates_per_invocation" => "contact_candidates_per_invocation",
-                other => other,
-            };
-            return bad(field, format!("{value} is not {expected}"));
+        // The engine's own rules for the contact settings, under this config's names; any other refusal
+        // passes on as the engine's error, never silently.
+        match self.contact_config().validate() {
+            Ok(()) => {}
+            Err(factory_engine::EngineError::Config { field, value, expected }) => {
+                let field = match field {
+                    "iterations" => "contact_descent_iters",
+                    "candidates_per_invocation" => "contact_candidates_per_invocation",
+                    other => other,
+                };
+                return bad(field, format!("{value} is not {expected}"));
+            }
+            Err(e) => return Err(e.into()),
         }
         if self.segments_per_turn < 8 {
             return bad("segments_per_turn", format!("{} is below 8", self.segments_per_turn));
