@@ -1,5 +1,5 @@
 //! `factory-plot --metrics RUN_DIR/metrics.csv --out curve.svg [--smooth 8] [--title T]`: the learning curve
-//! (success rate and mean return against env steps) of a run as SVG.
+//! (success rate against env steps and against training wall time, mean return against env steps) as SVG.
 
 use std::path::PathBuf;
 
