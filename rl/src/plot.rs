@@ -85,18 +85,20 @@ pub fn plot_svg(points: &[CurvePoint], title: &str) -> Result<String> {
         type Axis<'a> = (&'a str, &'a dyn Fn(&CurvePoint) -> f64, &'a dyn Fn(&f64) -> String);
         let by_steps: Axis = ("env steps", &steps, &millions);
         let by_hours: Axis = ("training wall time [h]", &hours, &plain);
-        let series: [(&str, &str, fn(&CurvePoint) -> f64, Axis); 3] = [
-            ("success rate of the episodes ended per update", "success rate", |p| p.success_rate, by_steps),
-            ("the same against wall time", "success rate", |p| p.success_rate, by_hours),
-            ("mean episode return", "return", |p| p.mean_return, by_steps),
+        // A rate is drawn on [0, 1] so that runs compare at a glance; a return on the range of its data.
+        let rate = Some((0.0, 1.0));
+        let series: [(&str, &str, fn(&CurvePoint) -> f64, Option<(f64, f64)>, Axis); 3] = [
+            ("success rate of the episodes ended per update", "success rate", |p| p.success_rate, rate, by_steps),
+            ("the same against wall time", "success rate", |p| p.success_rate, rate, by_hours),
+            ("mean episode return", "return", |p| p.mean_return, None, by_steps),
         ];
-        for (area, (caption, y_desc, f, (x_desc, x_of, x_fmt))) in panels.iter().zip(series) {
+        for (area, (caption, y_desc, f, y_fixed, (x_desc, x_of, x_fmt))) in panels.iter().zip(series) {
             let x1 = points.iter().map(x_of).fold(f64::MIN_POSITIVE, f64::max);
             let ys: Vec<(f64, f64)> = points.iter().map(|p| (x_of(p), f(p))).filter(|(_, y)| y.is_finite()).collect();
             let (mut y0, mut y1) =
                 ys.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
-            if y_desc == "success rate" {
-                (y0, y1) = (0.0, 1.0);
+            if let Some(fixed) = y_fixed {
+                (y0, y1) = fixed;
             } else if !(y0.is_finite() && y1 > y0) {
                 (y0, y1) = (y0.min(0.0) - 1.0, y1.max(0.0) + 1.0);
             }
