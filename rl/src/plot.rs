@@ -95,13 +95,14 @@ pub fn plot_svg(points: &[CurvePoint], title: &str) -> Result<String> {
         for (area, (caption, y_desc, f, y_fixed, (x_desc, x_of, x_fmt))) in panels.iter().zip(series) {
             let x1 = points.iter().map(x_of).fold(f64::MIN_POSITIVE, f64::max);
             let ys: Vec<(f64, f64)> = points.iter().map(|p| (x_of(p), f(p))).filter(|(_, y)| y.is_finite()).collect();
-            let (mut y0, mut y1) =
-                ys.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
-            if let Some(fixed) = y_fixed {
-                (y0, y1) = fixed;
-            } else if !(y0.is_finite() && y1 > y0) {
-                (y0, y1) = (y0.min(0.0) - 1.0, y1.max(0.0) + 1.0);
-            }
+            let (y0, y1) = y_fixed.unwrap_or_else(|| {
+                let (lo, hi) = ys.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
+                if lo.is_finite() && hi > lo {
+                    (lo, hi)
+                } else {
+                    (lo.min(0.0) - 1.0, hi.max(0.0) + 1.0)
+                }
+            });
             let mut chart = ChartBuilder::on(area)
                 .caption(caption, ("sans-serif", 15))
                 .margin(12)
