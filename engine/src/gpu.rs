@@ -3,12 +3,14 @@
 //! Adapter choice: `FACTORY_ADAPTER=gpu` takes a hardware adapter, `cpu` a software one (Mesa's lavapipe),
 //! any other value the first adapter whose name contains it (case-insensitive). Unset, a hardware adapter
 //! is preferred and lavapipe is the fallback. The device is created with the adapter's full limits and
-//! the features burn's cubecl-wgpu may use, so the trainer can later share it (DESIGN section 1); the
+//! the features burn's cubecl-wgpu may use, so the learner shares it (docs/ARCHITECTURE.md section 2); the
 //! engine's own needs ([`REQUIRED_LIMITS`]) are checked first and a shortfall names the limit.
 
 use crate::error::{EngineError, Result};
 use bytemuck::Pod;
 use std::sync::OnceLock;
+
+pub mod layout;
 
 /// Environment variable that selects the adapter: `gpu`, `cpu`, or a substring of the adapter name.
 pub const ADAPTER_ENV: &str = "FACTORY_ADAPTER";
@@ -215,6 +217,16 @@ impl GpuContext {
                 .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
                 .collect::<Vec<_>>(),
         })
+    }
+
+    /// Bind groups 0, 1, ... of `pipeline`, group i with the buffers of `groups[i]` at bindings 0, 1, ...
+    /// (see [`bind_group`](Self::bind_group)), created in that order.
+    pub fn bind_groups<const N: usize>(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        groups: [&[&wgpu::Buffer]; N],
+    ) -> [wgpu::BindGroup; N] {
+        std::array::from_fn(|i| self.bind_group(pipeline, i as u32, groups[i]))
     }
 
     /// An explicit pipeline layout: one bind group layout per entry of `groups`, each a list of

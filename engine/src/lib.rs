@@ -5,7 +5,9 @@
 //! contact candidate per query triangle against the opposing SDF and reduces the candidates into patches in
 //! workgroup memory ([`contact`]). A Gauss-Seidel solver steps the bodies ([`solver`]: one invocation per
 //! world for many small worlds; [`crowd`]: near pairs found per frame and graph-coloured for worlds of many
-//! bodies). Every kernel has a plain-Rust twin used by parity tests.
+//! bodies). [`sim`] steps worlds where an articulation ([`articulation`]: the Franka in joint coordinates)
+//! and free bodies touch, on top of the builder, the contact pipeline and the solver. Every kernel has a
+//! plain-Rust twin used by parity tests.
 
 pub mod error;
 pub mod mesh;
@@ -21,5 +23,6 @@ pub mod fsutil;
 pub mod gpu;
 pub mod rng;
 pub mod sdf;
+pub mod sim;
 pub mod solver;
 pub mod urdf;

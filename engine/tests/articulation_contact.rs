@@ -3,12 +3,12 @@
 //! drives acting through the fingers. Contacts come from the GPU pipeline (lavapipe on CI) every frame.
 
 use factory_engine::articulation::dynamics::{frame_pose, world_dynamics};
-use factory_engine::articulation::sim::ArticulatedSim;
 use factory_engine::articulation::{ArticulationControl, ArticulationModel, ArticulationState};
 use factory_engine::builder::{box_mass_properties, ModelBuilder};
 use factory_engine::contact::{ContactConfig, TransformGpu};
 use factory_engine::gpu::GpuContext;
 use factory_engine::sdf::cache::SdfCache;
+use factory_engine::sim::ArticulatedSim;
 use factory_engine::solver::{
     step_cpu_articulated_with, ArticulationStep, BodyState, Control, PatchSweep, SolverConfig, WarmStart,
 };
@@ -16,7 +16,7 @@ use factory_engine::urdf::{load_urdf, UrdfModel};
 use glam::{Quat, Vec3};
 use std::path::PathBuf;
 
-/// Factory's Screw reset pose (IsaacGymEnvs, reference section 1.7): the hand points down.
+/// Factory's Screw reset pose (IsaacGymEnvs' FactoryTaskNutBoltScrew.yaml): the hand points down.
 const Q_SCREW: [f32; 7] = [1.5178e-3, -0.19651, -1.4364e-3, -1.9761, -2.7717e-4, 1.7796, 0.78556];
 /// Half extents of the gripped block [m]: an M16 nut's 24 mm across flats, 13 mm tall (ISO 4032).
 const NUT_HALF: Vec3 = Vec3::new(0.012, 0.012, 0.0065);
@@ -24,7 +24,7 @@ const NUT_HALF: Vec3 = Vec3::new(0.012, 0.012, 0.0065);
 const STEEL: f32 = 7850.0;
 /// Finger pad centre above the hand origin [m]: finger joint 0.0584 + pad centre 0.044867 (the URDF).
 const PAD_CENTRE_Z: f32 = 0.0584 + 0.044867;
-/// Issue 21: the gripper holds the nut against gravity for 10 s with less than 0.5 mm slip.
+/// The gripper holds the nut against gravity for 10 s with less than 0.5 mm slip.
 const SLIP_MAX: f32 = 0.5e-3;
 
 fn franka() -> (UrdfModel, ArticulationModel) {
@@ -38,7 +38,7 @@ fn franka() -> (UrdfModel, ArticulationModel) {
         m.dof_drive_damping[d] = 100.0;
     }
     // The gripper's PD as a joint drive (damping implicit, as PhysX drives are): IsaacGymEnvs' gripper
-    // gains (reference section 1.5), kp 500 N/m and kd 20 N s/m, would be unstable as explicit torques on a
+    // gains (its `gym_default` drive), kp 500 N/m and kd 20 N s/m, would be unstable as explicit torques on a
     // 15 g finger at h = 1/120 s (kd h / m > 2). A finger 12 mm from closed pushes with 6 N, and the two
     // centre the part between them.
     for d in 7..9 {

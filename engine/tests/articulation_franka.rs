@@ -17,7 +17,7 @@ fn franka() -> ArticulationModel {
     let urdf = load_urdf(&path).expect("the Franka URDF loads");
     let mut m = ArticulationModel::from_urdf(&urdf, (Vec3::ZERO, Quat::IDENTITY), Vec3::new(0.0, 0.0, -9.81))
         .expect("the Franka URDF is an articulation");
-    // IsaacGymEnvs' Factory gives every Franka joint 0.01 armature (reference section 1.2).
+    // IsaacGymEnvs' Factory gives every Franka joint 0.01 armature (factory_base.py's asset options).
     m.set_armature(0.01);
     m
 }
@@ -244,7 +244,7 @@ fn arm_holds_its_pose_under_gravity_compensation() {
     let m = franka();
     let n = m.dof_count();
     let tip = m.frame("panda_fingertip_centered").unwrap();
-    // Factory's Screw reset pose (reference section 1.7), fingers half open.
+    // Factory's Screw reset pose (IsaacGymEnvs' FactoryTaskNutBoltScrew.yaml), fingers half open.
     let q0 = [1.5178e-3, -0.19651, -1.4364e-3, -1.9761, -2.7717e-4, 1.7796, 0.78556, 0.02, 0.02];
     let mut state = ArticulationState::replicate(&q0, 4);
     let start = world_dynamics(&m, &q0, &[0.0; 9], &tip).frame_pose.0;

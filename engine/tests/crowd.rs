@@ -22,13 +22,13 @@ const H: Vec3 = Vec3::new(0.02, 0.015, 0.01);
 /// GPU against the CPU twin, one frame from the same poses: the same sweeps in the same order, so they
 /// differ by f32 rounding (fused multiply-adds, lavapipe's reassociation) only; but a box lying flat has
 /// four equally deep corners, and which of them takes a patch slot is decided by that rounding, so a
-/// frame can end a few micrometres apart (measured 2026-12-01: at most 3.7e-6 m) [m], [m/s] ...
+/// frame can end a few micrometres apart (measured: at most 3.7e-6 m) [m], [m/s] ...
 const PARITY_TOL: f32 = 1e-5;
 /// ... (and velocities up to 1.8e-3 m/s) [m/s] ...
 const PARITY_VEL_TOL: f32 = 5e-3;
 /// ... while the median frame agrees to rounding [m]. Warm-started, each side keeps its own rows (they
 /// cannot be re-synchronised), and one warm-start match at its distance threshold going the other way
-/// carries other impulses for about a dozen frames: measured 2026-12-01, 6.6e-6 m growing to 5.7e-5 m
+/// carries other impulses for about a dozen frames: measured, 6.6e-6 m growing to 5.7e-5 m
 /// and back over frames 47-58 of 60 (median 2e-8 m) [m].
 const PARITY_MEDIAN_TOL: f32 = 2e-7;
 const PARITY_WARM_TOL: f32 = 2e-4;
@@ -175,7 +175,7 @@ const RESTING: u32 = 30;
 /// Two layers of six boxes, 2 mm apart side by side and 0.5 mm above what carries them, settling onto the
 /// table and each other: resting contacts that last from frame to frame, so warm starting matters. Landing
 /// is chaotic (which of four equally deep corners wins a patch slot is decided by rounding): free runs of
-/// the GPU and the CPU twin part ways, 1e-8 m becoming 5e-5 m within 3 frames (measured 2026-12-01), so the
+/// the GPU and the CPU twin part ways, 1e-8 m becoming 5e-5 m within 3 frames (measured), so the
 /// CPU twin is re-synchronised to the GPU's poses every frame: landing frames cold on both sides, resting
 /// frames warm-started, each side from its own rows (see PARITY_WARM_TOL).
 fn stacked_boxes() -> (CrowdModel, BodyModel, BodyState) {
@@ -439,8 +439,8 @@ fn a_broken_crowd_world_is_reset_alone_and_every_world_then_steps_as_if_it_never
 /// asleep, alike on the GPU and in the CPU twin; asleep, they keep their poses to the bit with zero velocity;
 /// a kinematic box driven across the table into them wakes the boxes it reaches, which then move, and never
 /// sleeps itself. (The upper layer is left out: at these settings, 1 substep and 16 iterations, its boxes,
-/// each bridging two lower ones, keep rocking at up to 1 rad/s, 0.01-0.06 rad a frame; measured
-/// 2026-12-03 with this test's trace.)
+/// each bridging two lower ones, keep rocking at up to 1 rad/s, 0.01-0.06 rad a frame, as
+/// this test's trace shows.)
 #[test]
 fn a_settled_stack_falls_asleep_alike_on_the_gpu_and_in_the_twin_and_a_pusher_wakes_it() {
     /// Frames a box must stay within SLEEP_DISTANCE and SLEEP_ANGLE of one pose to sleep.

@@ -17,10 +17,35 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
-const NUT: &str =
-    concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/peer_assets/factory/mesh/factory_nut_m16_tight_subdiv_3x.obj");
-const BOLT: &str =
-    concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/peer_assets/factory/mesh/factory_bolt_m16_tight.obj");
+/// Factory's meshes are not part of this repository: the tests read them from the folder named by
+/// `FACTORY_PEER_ASSETS` (Factory's asset tree, with the meshes under `factory/mesh/`) and skip, saying so,
+/// when it is unset. `.ci/run` sets it where the CI machine provides the folder.
+const PEER_ASSETS_VAR: &str = "FACTORY_PEER_ASSETS";
+const NUT: &str = "factory_nut_m16_tight_subdiv_3x.obj";
+const BOLT: &str = "factory_bolt_m16_tight.obj";
+
+/// The path of one of Factory's meshes, or `None` (after saying why the test is skipped) when
+/// `FACTORY_PEER_ASSETS` is unset.
+fn peer_mesh(name: &str) -> Option<PathBuf> {
+    match std::env::var_os(PEER_ASSETS_VAR) {
+        Some(dir) => Some(Path::new(&dir).join("factory/mesh").join(name)),
+        None => {
+            eprintln!(
+                "skipped: {PEER_ASSETS_VAR} is not set (the folder holding Factory's meshes under factory/mesh/)"
+            );
+            None
+        }
+    }
+}
+
+/// Returns from the test, skipped, when Factory's meshes are not available.
+macro_rules! require_peer_assets {
+    () => {
+        if peer_mesh(NUT).is_none() {
+            return;
+        }
+    };
+}
 
 /// Resolution of the accuracy and gradient tests (nut: about 119 x 136 x 69 samples).
 const ACCURACY_RESOLUTION: u32 = 128;
@@ -31,13 +56,14 @@ const SIGN_RESOLUTION: u32 = 80;
 const SURFACE_EPS: f32 = 1e-6;
 
 /// The OBJ as written, with every vertex repeated per face (11140 boundary edges for the nut).
-fn load_raw(path: &str) -> TriMesh {
-    TriMesh::load_obj(Path::new(path)).unwrap_or_else(|e| panic!("{e}"))
+fn load_raw(name: &str) -> TriMesh {
+    let path = peer_mesh(name).expect("FACTORY_PEER_ASSETS checked by require_peer_assets!");
+    TriMesh::load_obj(&path).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Welds coincident vertices (the OBJ writes coordinates to 1e-6 m, so 1e-9 m merges exact duplicates only).
-fn load(path: &str) -> TriMesh {
-    load_raw(path).weld(1e-9)
+fn load(name: &str) -> TriMesh {
+    load_raw(name).weld(1e-9)
 }
 
 fn nut() -> &'static TriMesh {
@@ -179,6 +205,7 @@ const MEAN_ERROR_MAX_VOXELS: f32 = 0.05;
 
 #[test]
 fn distance_accuracy_nut() {
+    require_peer_assets!();
     let g = nut_fine();
     let exact = exact_nut();
     let h = g.spacing;
@@ -244,6 +271,7 @@ const GRADIENT_MIN_POINTS: usize = 500;
 
 #[test]
 fn gradient_near_surface_nut() {
+    require_peer_assets!();
     let g = nut_fine();
     let exact = exact_nut();
     let h = g.spacing;
@@ -320,6 +348,7 @@ fn assert_signs_everywhere(name: &str, g: &SdfGrid, exact: &Exact) -> usize {
 
 #[test]
 fn sign_at_every_grid_point_nut_and_bolt() {
+    require_peer_assets!();
     let n = assert_signs_everywhere("nut", nut_coarse(), exact_nut());
     let bolt_grid = bake(bolt(), &params(SIGN_RESOLUTION)).unwrap();
     let m = assert_signs_everywhere("bolt", &bolt_grid, &Exact::new(bolt()));
@@ -336,6 +365,7 @@ const OPEN_EXCLUSION_VOXELS: f32 = 2.0;
 
 #[test]
 fn open_mesh_keeps_signs() {
+    require_peer_assets!();
     let rec = recorder();
     let closed = nut();
     let mut rng = Lcg(12345);
@@ -401,6 +431,7 @@ const REFUSAL_TIME_LIMIT: Duration = Duration::from_millis(100);
 
 #[test]
 fn oversized_bake_is_refused_before_allocating() {
+    require_peer_assets!();
     let mesh = nut();
     let start = Instant::now();
     let e = bake(mesh, &params(100_000)).unwrap_err();
@@ -442,6 +473,7 @@ fn temp_dir(name: &str) -> PathBuf {
 
 #[test]
 fn cache_hits_and_rebakes_corrupt_entries() {
+    require_peer_assets!();
     let dir = temp_dir("cache");
     let cache = SdfCache::new(&dir);
     let mesh = bolt();
@@ -523,6 +555,7 @@ fn killed_bake_child() {
 
 #[test]
 fn killed_bake_leaves_no_corrupt_cache() {
+    require_peer_assets!();
     let dir = temp_dir("killed");
     let mut child = std::process::Command::new(std::env::current_exe().unwrap())
         .args(["--exact", "killed_bake_child", "--ignored", "--nocapture", "--test-threads", "1"])

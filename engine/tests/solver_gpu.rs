@@ -15,7 +15,7 @@ use std::sync::Arc;
 /// GPU and CPU differ only by float rounding order within one frame [m], [m/s].
 const PARITY_POS_TOL: f32 = 2e-6;
 const PARITY_VEL_TOL: f32 = 2e-4;
-/// A box at rest on a table drifts less than 1e-3 mm/s (issue 4).
+/// A box at rest on a table drifts less than 1e-3 mm/s (docs/ARCHITECTURE.md section 10).
 const REST_DRIFT: f32 = 1e-6;
 
 const H: Vec3 = Vec3::new(0.02, 0.015, 0.01);

@@ -1,5 +1,5 @@
-//! Stability of the Gauss-Seidel step (DESIGN section 6: "resting contact does not drift; energy does not
-//! grow"), on the GPU solver with the CPU reference `step_cpu` run on the same scenes (contacts from the GPU
+//! Stability of the Gauss-Seidel step (docs/ARCHITECTURE.md section 10: resting contact does not drift; energy
+//! does not grow), on the GPU solver with the CPU reference `step_cpu` run on the same scenes (contacts from the GPU
 //! pipeline every frame in both cases; the GPU path submits contacts + solver as one command buffer per frame
 //! and keeps the state on the device, read back only to measure).
 //!
@@ -24,7 +24,7 @@ const DENSITY: f32 = 7850.0;
 /// Contact offset of every pair [m]: covers what a box moves in a frame in these scenes.
 const OFFSET: f32 = 0.005;
 
-/// Issue 4: a box resting on a table drifts less than 1e-3 mm/s, measured after settling.
+/// A box resting on a table drifts less than 1e-3 mm/s, measured after settling.
 const REST_DRIFT_MAX: f32 = 1e-6;
 /// Settling time before the drift is measured [frames] (1 s).
 const SETTLE_FRAMES: u32 = 60;
@@ -32,7 +32,7 @@ const SETTLE_FRAMES: u32 = 60;
 const STACK_XY_FRACTION: f32 = 0.01;
 /// A stacked box's height stays within this fraction of its own height of the exact stacked height.
 const STACK_Z_FRACTION: f32 = 0.01;
-/// Issue 4: a closed frictionless system gains less than 1% energy over 10 s.
+/// A closed frictionless system gains less than 1% energy over 10 s.
 const ENERGY_GAIN_MAX: f64 = 0.01;
 /// The frame-to-frame rise of a depenetrating box is the capped speed itself (the position sweeps drive the
 /// normal velocity to exactly min(depth / h, cap)); this relative slack covers f32 rounding only.
@@ -343,7 +343,7 @@ fn a_closed_frictionless_system_gains_less_than_1_percent_energy_over_10_s() {
     for on_gpu in [true, false] {
         let (e0, e_max, e_end, _) = frictionless_run(h, &slide_start(h), OFFSET, on_gpu, "slide");
         assert!(e_max <= e0 * (1.0 + ENERGY_GAIN_MAX), "slide: energy rose to {e_max} J from {e0} J");
-        // (A slide has nothing to lose energy to either: report it, assert only what the issue asks.)
+        // (A slide has nothing to lose energy to either: report it, assert only that energy does not rise.)
         let _ = e_end;
         let (e0, e_max, _, end) = frictionless_run(h, &drop_start(), OFFSET, on_gpu, "drop");
         assert!(e_max <= e0 * (1.0 + ENERGY_GAIN_MAX), "drop: energy rose to {e_max} J from {e0} J");
@@ -353,11 +353,11 @@ fn a_closed_frictionless_system_gains_less_than_1_percent_energy_over_10_s() {
 }
 
 /// The same drop with a contact offset large enough to cover a frame's fall (30 mm, so contacts are
-/// speculative before the impact). Regression: the plane pair gives one patch (one normal) of at most 4
-/// contacts, and the reduction used to choose slots 2-4 by distance from the deepest contact alone: the
-/// box's top corners, 21 mm above the table but within the offset, won over the other bottom corners and the
-/// box settled 3.07 mm sunk (corner 7.1 mm into the table, energy -101%). Slots 2-4 now skip contacts far
-/// above both the deepest one and the surface (DEPTH_BAND in common.wgsl).
+/// speculative before the impact). Regression test: the plane pair gives one patch (one normal) of at most 4
+/// contacts, and a reduction that chooses slots 2-4 by distance from the deepest contact alone lets the
+/// box's top corners, 21 mm above the table but within the offset, win over the other bottom corners: the
+/// box settles 3.07 mm sunk (corner 7.1 mm into the table, energy -101%). Slots 2-4 therefore skip contacts
+/// far above both the deepest one and the surface (DEPTH_BAND in common.wgsl).
 #[test]
 fn a_box_dropped_with_a_large_contact_offset_lands_on_the_table() {
     let h = Vec3::new(0.02, 0.015, 0.01);

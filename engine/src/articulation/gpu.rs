@@ -41,11 +41,11 @@
 //! rounding, and neither pays at the Franka's size yet. A scratch storage buffer instead of private arrays
 //! would cost a binding (none left) and the same memory traffic. On lavapipe the worlds run 8 to a SIMD
 //! register; the worlds share the model, so their control flow diverges only at limits, but every
-//! run-time index into a private array becomes a per-lane gather or scatter. Measured on this machine
-//! (2 cores, the Franka, 2026-12): a step of 2 substeps takes 0.76 / 6.4 / 22 ms at 64 / 1024 / 4096
+//! run-time index into a private array becomes a per-lane gather or scatter. Measured on a 2-core
+//! CPU with the Franka: a step of 2 substeps takes 0.76 / 6.4 / 22 ms at 64 / 1024 / 4096
 //! worlds, `dynamics` 0.44 / 2.9 / 12 ms, where the rayon CPU reference steps in 0.17 / 2.4 / 9.3 ms. So on
 //! the CPU fallback this kernel is 2.4-4.5x slower than the host code; it exists for the GPU, where the state
-//! then never leaves the device (DESIGN.md 5).
+//! then never leaves the device (docs/ARCHITECTURE.md section 7).
 //!
 //! Loops: lavapipe's per-invocation loop budget ([`crate::contact::LOOP_ITERATION_LIMIT`]) is checked on
 //! the host from [`loop_passes`]; a software adapter refuses substep counts that would pass it.
@@ -357,8 +357,8 @@ fn mass_matrix_passes(model: &ArticulationModel) -> u64 {
 /// Loop passes one invocation makes in articulation.wgsl (and articulation_core.wgsl): (one `step` of `substeps` substeps, one
 /// `dynamics` at `frame`), each loop of p passes counted p + 1 as llvmpipe counts them; keep it in step
 /// with the shader's loops. For the Franka: 885 per substep (1791 for a step of 2) and 760 for `dynamics`.
-/// Checked on this machine's lavapipe with the budget lifted: a Franka step matched the CPU up to 72
-/// substeps (counted 63741) and was cut short from 73 (counted 64626), so the count runs at most ~1.5%
+/// Checked on lavapipe with the budget lifted: a Franka step matches the CPU up to 72
+/// substeps (counted 63741) and is cut short from 73 (counted 64626), so the count runs at most ~1.5%
 /// under llvmpipe's, well inside the 1/8 of the limit [`ArticulationGpu::new`] keeps in reserve.
 pub fn loop_passes(model: &ArticulationModel, frame: &Frame, substeps: u32) -> (u64, u64) {
     let (nl, n) = (model.link_count() as u64, model.dof_count() as u64);

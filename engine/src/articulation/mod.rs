@@ -1,6 +1,6 @@
 //! Articulated robots in reduced (joint) coordinates: a tree of links connected by revolute, continuous,
-//! prismatic and fixed joints, fixed to the world at its root (the Franka of Factory's section IV and
-//! DESIGN.md 4.5).
+//! prismatic and fixed joints, fixed to the world at its root (the Franka of Factory's section IV;
+//! docs/ARCHITECTURE.md section 3).
 //!
 //! The state of a world is its joint positions and velocities (`joint_q`, `joint_qd`, `dof_count` each).
 //! From them [`dynamics`] computes, per world: forward kinematics (link poses), the geometric Jacobian of
@@ -24,7 +24,6 @@
 pub mod dynamics;
 pub mod gpu;
 pub mod rotation;
-pub mod sim;
 
 use crate::error::{EngineError, Result};
 use crate::urdf::{JointType, UrdfModel};

@@ -19,9 +19,9 @@
 // rounds reads a patch's slots once for all its candidates in that patch (a loop over the distinct patches
 // of its candidates; with PER > 1 the pipelines order each job's query triangles by normal so that
 // consecutive ones tend to share a patch, model.rs normal_ordered: 1.07x at 256 worlds). Measured on
-// lavapipe (docs/BENCHMARKS.md, 2026-12-03): PER 4 handles the M16 nut-bolt pair's contacts 1.3x faster than
+// lavapipe (docs/BENCHMARKS.md): PER 4 handles the M16 nut-bolt pair's contacts 1.3x faster than
 // PER 1 at 64 invocations, 1.6x with 32. On a GPU it trades parallelism within a workgroup, which the worlds
-// supply, for fewer barriers per candidate (not measured: no GPU here).
+// supply, for fewer barriers per candidate (not measured on a GPU).
 //
 // Loops: lavapipe (llvmpipe) gives each shader invocation ONE loop counter shared by all its loops,
 // 65535 back edges in total (LP_MAX_TGSI_LOOP_ITERATIONS); past it every loop exits after one pass and
@@ -33,7 +33,7 @@
 // (every `for` and `while`) runs the whole body once more, every lane masked off, after its last pass (only
 // memory accesses are skipped, lane by lane). The per-batch and per-triangle loops here therefore test at
 // the end of the pass (do-while; the two SDF samples this saved per triangle of the nut-bolt pair and the
-// batch loop's extra pass: contact handling about 1.1x faster, 2026-12-03, docs/BENCHMARKS.md).
+// batch loop's extra pass: contact handling about 1.1x faster, docs/BENCHMARKS.md).
 const WG: u32 = WG_VALUE;
 const PER: u32 = PER_VALUE;
 const BATCH: u32 = WG_VALUE * PER_VALUE;
@@ -439,7 +439,7 @@ fn evict(lid: u32, offset: f32, mine: ptr<function, vec4<u32>>) {
 //
 // Barriers serialise warps on a GPU, so each step is placed to need as few as possible (a batch that opens
 // no patch costs 9: 2 for its one FindDeepest round, 2 per slot round and 1 after the last). On lavapipe
-// they cost next to nothing (measured 2026-12-02: what costs there is every memory instruction, run lane by
+// they cost next to nothing (measured: what costs there is every memory instruction, run lane by
 // lane, and every branch's body, run masked whether taken or not; see docs/BENCHMARKS.md):
 // - no barrier at entry: Assign reads only this invocation's candidates and the patch normals and slot 0s,
 //   which the previous batch last wrote before a barrier; candidates of other invocations are read only

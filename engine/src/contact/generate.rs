@@ -33,8 +33,8 @@ pub fn reduce_with_subgroups(gpu: &crate::gpu::GpuContext, cfg: &ContactConfig) 
 /// Which SDF kinds a pipeline's model uses. Each kind's branch in `sdf_sample` (sdf_sample.wgsl) is compiled
 /// in only when used: lavapipe inlines every call and runs both sides of every branch under a lane mask, so an
 /// unused kind costs its whole body at every sample site. Measured on the nut-bolt pair at 64 worlds: the
-/// revolved field's 15 written-out segments doubled generate's run time (2026-11-22: 1300 vs 640 ms per
-/// frame), the grid's 8 lane-by-lane reads made generation alone 1.6x slower (2026-12-02).
+/// revolved field's 15 written-out segments double generate's run time (1300 vs 640 ms per
+/// frame), the grid's 8 lane-by-lane reads make generation alone 1.6x slower.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SdfKinds {
     /// Some pair's SDF is a voxel grid (kind 0).
@@ -115,10 +115,10 @@ pub(crate) fn compute_pipeline_with(
 /// The generation pipelines: the first pass over every job, without eviction, and the retry pass over the
 /// jobs whose patch budget overflowed, or overflowed last frame and is still flagged (generate.wgsl). The
 /// first pass runs as one dispatch per run of consecutive jobs whose pairs share an SDF kind, each with a
-/// pipeline compiled for that kind alone: in one pipeline for all kinds, lavapipe ran every other kind's
+/// pipeline compiled for that kind alone: in one pipeline for all kinds, lavapipe runs every other kind's
 /// sampling, masked, at every descent step (the Franka Screw scene at 128 worlds: the thread pair's
-/// generation 272 ms per frame alone, 381 ms beside the pads' grid pair, whose own work is a few ms;
-/// 2026-12-05). The retry pass runs per kind too, one indirect dispatch per kind in use.
+/// generation takes 272 ms per frame alone, 381 ms beside the pads' grid pair, whose own work is a few
+/// ms). The retry pass runs per kind too, one indirect dispatch per kind in use.
 pub struct GenerateKernel {
     /// The first pass's pipelines, one per SDF kind (`model.rs` PairGpu::sdf_kind) in `runs`.
     pub first: Vec<(u32, wgpu::ComputePipeline)>,

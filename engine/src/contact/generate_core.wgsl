@@ -189,7 +189,7 @@ fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: T
 // same candidates to the last bit. Used where every SDF of the model is the analytic thread (VEC4_DESCENT):
 // its samples are long chains of dependent divisions and square roots, and on lavapipe four independent
 // chains side by side overlap (thread.wgsl thread_sample4): the nut-bolt pair's contact handling 1.24x
-// faster (docs/BENCHMARKS.md, 2026-12-03). With grid
+// faster (docs/BENCHMARKS.md). With grid
 // SDFs lavapipe reads every voxel lane by lane anyway, and a culled triangle in one batch slot would cost
 // the other three their skip, so the piles keep the one-triangle path.
 // INTERLEAVED_DESCENT: ContactConfig::interleaved_descent (set by generate.rs; the crowd kernels, whose SDFs

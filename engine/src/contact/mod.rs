@@ -61,7 +61,7 @@ pub struct ContactConfig {
     /// an invocation with several candidates (consecutive query triangles, which the pipelines then order
     /// by normal within each job: [`model::normal_ordered`]) reads the patch list once for all of them
     /// (common.wgsl). Default 1. With 4 the M16 nut-bolt pair's contact handling is faster on lavapipe
-    /// (docs/BENCHMARKS.md, 2026-12-03) and its descent and self-locking keep their accuracy, but larger
+    /// (docs/BENCHMARKS.md) and its descent and self-locking keep their accuracy, but larger
     /// batches in another order keep other contacts, and the single-seed rest tests of the peg and the
     /// piles came out otherwise (the aligned peg rocking at a median 1.18e-3 m/s against the bound of
     /// 1e-3; the seed-1 torus and 64-nut piles creeping 8.8 and 2.0 mm in their last second).
@@ -74,7 +74,7 @@ pub struct ContactConfig {
     /// triangles' descents side by side, as vectors across the triangles (generate_core.wgsl
     /// `triangles4`); false: one after another. The results are bitwise the same either way; on lavapipe
     /// side by side is about 1.25x faster (the samples' division and square-root chains overlap; see
-    /// docs/BENCHMARKS.md, 2026-12-03).
+    /// docs/BENCHMARKS.md).
     pub interleaved_descent: bool,
 }
 
@@ -159,8 +159,8 @@ impl ContactConfig {
         // The stream holds at most 4 slots per patch of every job; per batch: the batch loop, the search
         // of its first job, the loop over the invocation's entries, their walk to their jobs (a batch spans
         // at most BATCH / 4 + 1 jobs that hold slots, plus the empty ones between them, counted once below;
-        // one more exit per entry), 5 per entry for its 4-slot count (a loop before 2026-12-03, written out
-        // since: still counted, on the safe side), the reduction.
+        // one more exit per entry), 5 per entry for its 4-slot count (written out, not a loop, but still
+        // counted, on the safe side), the reduction.
         let per = self.candidates_per_invocation;
         let batches = (jobs as u64 * self.max_patches as u64 * 4).div_ceil(self.batch_size() as u64);
         let per_batch = 1 + 1 + (per + 1) + (self.batch_size() / 4 + 2 + per) + 5 * per + self.reduce_batch_loops();

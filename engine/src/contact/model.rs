@@ -114,7 +114,8 @@ pub struct PairGpu {
     pub body_b: u32,
     pub tri_first: u32,
     pub tri_count: u32,
-    /// 0: grid, 1: half-space z <= 0, 2: analytic threaded bolt (params at word sdf_dims.w).
+    /// 0: grid, 1: half-space z <= 0, 2: analytic threaded bolt, 3: analytic solid of revolution (params of
+    /// 2 and 3 at word sdf_dims.w).
     pub sdf_kind: u32,
     pub job_first: u32,
     pub job_count: u32,
@@ -267,7 +268,7 @@ impl FlatModel {
     /// a pair's jobs) is left out: the pipeline's generate pass writes the final patches, and the CPU twin
     /// skips merge_cpu likewise. Run on one job's patches the merge would only re-order them, re-pick the
     /// same contacts into slots and re-round the patch areas from per-contact shares (the nut-bolt pair's
-    /// contact handling at 256 worlds: about 14% of it, 2026-12-03).
+    /// contact handling at 256 worlds: about 14% of it).
     pub fn single_job_pairs(&self) -> bool {
         self.jobs.len() == self.pairs.len()
             && self.pairs.iter().enumerate().all(|(i, p)| p.job_count == 1 && p.job_first == i as u32)
@@ -329,6 +330,137 @@ fn quat4(q: Quat) -> [f32; 4] {
     [q.x, q.y, q.z, q.w]
 }
 
+/// Checks a pair's body indices, friction and contact offset.
+fn check_pair(i: usize, p: &PairSpec, body_count: u32) -> Result<()> {
+    for (field, body) in [("body_a", p.body_a), ("body_b", p.body_b)] {
+        if body != NO_BODY && body >= body_count {
+            return Err(EngineError::Config {
+                field,
+                value: format!("{body} (pair {i})"),
+                expected: format!("a body index below body_count = {body_count} or NO_BODY"),
+            });
+        }
+    }
+    if !(p.friction.is_finite() && p.friction >= 0.0) {
+        return Err(EngineError::Config {
+            field: "friction",
+            value: format!("{} (pair {i})", p.friction),
+            expected: "a finite coefficient >= 0".into(),
+        });
+    }
+    if !(p.contact_offset.is_finite() && p.contact_offset >= 0.0) {
+        return Err(EngineError::Config {
+            field: "contact_offset",
+            value: format!("{} (pair {i})", p.contact_offset),
+            expected: "a finite distance >= 0 [m]".into(),
+        });
+    }
+    Ok(())
+}
+
+/// A [`FlatModel`] being built, with the query shapes and grids already in it: shared ones are uploaded (and
+/// a grid's bound scanned) once.
+#[derive(Default)]
+struct Flattening {
+    flat: FlatModel,
+    query_first: Vec<(*const QueryShape, u32)>,
+    grid_offset: Vec<(*const SdfGrid, u32)>,
+    grid_bound: Vec<(*const SdfGrid, [f32; 4])>,
+}
+
+impl Flattening {
+    /// The first query triangle of `p`'s query shape, uploading the shape where it is new.
+    fn query(&mut self, p: &PairSpec, chunk: u32, by_normal: bool) -> u32 {
+        let key = Arc::as_ptr(&p.query);
+        match self.query_first.iter().find(|(k, _)| *k == key) {
+            Some(&(_, f)) => f,
+            None => {
+                let f = (self.flat.tri_verts.len() / 3) as u32;
+                let ordered: Cow<[[Vec3; 3]]> = if by_normal {
+                    Cow::Owned(normal_ordered(&p.query.triangles, chunk as usize))
+                } else {
+                    Cow::Borrowed(&p.query.triangles)
+                };
+                for t in ordered.iter() {
+                    self.flat.tri_verts.extend(t.iter().map(|v| pose4(*v)));
+                }
+                self.query_first.push((key, f));
+                f
+            }
+        }
+    }
+
+    /// The SDF shape's (sdf_kind, sdf_origin, sdf_dims, sdf_scale) of [`PairGpu`], appending its words to
+    /// sdf_values where they are new.
+    fn sdf(&mut self, sdf: &SdfShape) -> (u32, [f32; 4], [u32; 4], f32) {
+        let flat = &mut self.flat;
+        match sdf {
+            SdfShape::Plane => (1u32, [0.0; 4], [2, 2, 2, 0], 0.0),
+            // Exact field: no interpolation slack (sdf_origin.w = 0); parameters as words in sdf_values.
+            SdfShape::Thread(t) => {
+                let base = flat.sdf_values.len() as u32;
+                flat.sdf_values.extend_from_slice(&t.to_words());
+                (2u32, [0.0; 4], [2, 2, 2, base], 0.0)
+            }
+            SdfShape::Revolved(r) => {
+                let base = flat.sdf_values.len() as u32;
+                flat.sdf_values.extend_from_slice(&r.to_words());
+                (3u32, [0.0; 4], [2, 2, 2, base], 0.0)
+            }
+            SdfShape::Grid(g) => {
+                let key = Arc::as_ptr(g);
+                let scale = sdf_quantum(g.spacing);
+                let off = match self.grid_offset.iter().find(|(k, _)| *k == key) {
+                    Some(&(_, o)) => o,
+                    None => {
+                        let o = 2 * flat.sdf_values.len() as u32;
+                        flat.sdf_values.extend(pack_i16(&g.values, scale));
+                        self.grid_offset.push((key, o));
+                        o
+                    }
+                };
+                (0, [g.origin.x, g.origin.y, g.origin.z, g.spacing], [g.dims.x, g.dims.y, g.dims.z, off], scale)
+            }
+        }
+    }
+
+    /// Jobs of `chunk` query triangles (the last one shorter) over a pair's triangles; returns the first.
+    fn push_jobs(&mut self, pair: u32, tri_first: u32, tri_count: u32, chunk: u32) -> u32 {
+        let jobs = &mut self.flat.jobs;
+        let job_first = jobs.len() as u32;
+        let mut start = 0;
+        while start < tri_count {
+            let n = chunk.min(tri_count - start);
+            jobs.push(JobGpu { pair, tri_first: tri_first + start, tri_count: n, slot: jobs.len() as u32 - job_first });
+            start += n;
+        }
+        job_first
+    }
+
+    /// The bounding sphere of `p`'s SDF shape in its own frame ([`PairGpu::b_bound`]).
+    fn sdf_bound(&mut self, p: &PairSpec) -> [f32; 4] {
+        match &p.sdf {
+            // Shared grids (a pile's parts) are scanned once.
+            SdfShape::Grid(g) => {
+                let key = Arc::as_ptr(g);
+                match self.grid_bound.iter().find(|(k, _)| *k == key) {
+                    Some(&(_, b)) => b,
+                    None => {
+                        let b = p.sdf.bound();
+                        self.grid_bound.push((key, b));
+                        b
+                    }
+                }
+            }
+            SdfShape::Thread(t) => {
+                let [x, y, z, r] = t.bound();
+                [x, y, z, r + THREAD_BOUND_SLACK * p.contact_offset]
+            }
+            other => other.bound(),
+        }
+    }
+}
+
 impl ContactModel {
     /// Flattens the model; `chunk` query triangles per job (a multiple of 256), each shape's triangles in
     /// their order.
@@ -347,100 +479,20 @@ impl ContactModel {
                 expected: "query triangles per job: a multiple of 256 (256, 512, ...)".into(),
             });
         }
-        let mut flat = FlatModel::default();
-        let mut query_first: Vec<(*const QueryShape, u32)> = Vec::new();
-        let mut grid_offset: Vec<(*const SdfGrid, u32)> = Vec::new();
-        let mut grid_bound: Vec<(*const SdfGrid, [f32; 4])> = Vec::new();
+        let mut f = Flattening::default();
         for (i, p) in self.pairs.iter().enumerate() {
-            for (field, body) in [("body_a", p.body_a), ("body_b", p.body_b)] {
-                if body != NO_BODY && body >= self.body_count {
-                    return Err(EngineError::Config {
-                        field,
-                        value: format!("{body} (pair {i})"),
-                        expected: format!("a body index below body_count = {} or NO_BODY", self.body_count),
-                    });
-                }
-            }
-            if !(p.friction.is_finite() && p.friction >= 0.0) {
-                return Err(EngineError::Config {
-                    field: "friction",
-                    value: format!("{} (pair {i})", p.friction),
-                    expected: "a finite coefficient >= 0".into(),
-                });
-            }
-            if !(p.contact_offset.is_finite() && p.contact_offset >= 0.0) {
-                return Err(EngineError::Config {
-                    field: "contact_offset",
-                    value: format!("{} (pair {i})", p.contact_offset),
-                    expected: "a finite distance >= 0 [m]".into(),
-                });
-            }
-            // Shared query shapes are uploaded once.
-            let key = Arc::as_ptr(&p.query);
-            let tri_first = match query_first.iter().find(|(k, _)| *k == key) {
-                Some(&(_, f)) => f,
-                None => {
-                    let f = (flat.tri_verts.len() / 3) as u32;
-                    let ordered: Cow<[[Vec3; 3]]> = if by_normal {
-                        Cow::Owned(normal_ordered(&p.query.triangles, chunk as usize))
-                    } else {
-                        Cow::Borrowed(&p.query.triangles)
-                    };
-                    for t in ordered.iter() {
-                        flat.tri_verts.extend(t.iter().map(|v| pose4(*v)));
-                    }
-                    query_first.push((key, f));
-                    f
-                }
-            };
+            check_pair(i, p, self.body_count)?;
+            let tri_first = f.query(p, chunk, by_normal);
             let tri_count = p.query.triangles.len() as u32;
-            let (sdf_kind, sdf_origin, sdf_dims, sdf_scale) = match &p.sdf {
-                SdfShape::Plane => (1u32, [0.0; 4], [2, 2, 2, 0], 0.0),
-                // Exact field: no interpolation slack (sdf_origin.w = 0); parameters as words in sdf_values.
-                SdfShape::Thread(t) => {
-                    let base = flat.sdf_values.len() as u32;
-                    flat.sdf_values.extend_from_slice(&t.to_words());
-                    (2u32, [0.0; 4], [2, 2, 2, base], 0.0)
-                }
-                SdfShape::Revolved(r) => {
-                    let base = flat.sdf_values.len() as u32;
-                    flat.sdf_values.extend_from_slice(&r.to_words());
-                    (3u32, [0.0; 4], [2, 2, 2, base], 0.0)
-                }
-                SdfShape::Grid(g) => {
-                    let key = Arc::as_ptr(g);
-                    let scale = sdf_quantum(g.spacing);
-                    let off = match grid_offset.iter().find(|(k, _)| *k == key) {
-                        Some(&(_, o)) => o,
-                        None => {
-                            let o = 2 * flat.sdf_values.len() as u32;
-                            flat.sdf_values.extend(pack_i16(&g.values, scale));
-                            grid_offset.push((key, o));
-                            o
-                        }
-                    };
-                    (0, [g.origin.x, g.origin.y, g.origin.z, g.spacing], [g.dims.x, g.dims.y, g.dims.z, off], scale)
-                }
-            };
+            let (sdf_kind, sdf_origin, sdf_dims, sdf_scale) = f.sdf(&p.sdf);
             // Area quantum: 1/64 of the mean triangle area, so patch measures resolve small triangles.
             let total_area: f32 =
                 p.query.triangles.iter().map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length()).sum();
             let mean_area = total_area / tri_count.max(1) as f32;
             let area_unit = if mean_area > 0.0 { mean_area / 64.0 } else { 1e-12 };
             let mean_edge = (2.0 * mean_area).sqrt();
-            let job_first = flat.jobs.len() as u32;
-            let mut start = 0;
-            while start < tri_count {
-                let n = chunk.min(tri_count - start);
-                flat.jobs.push(JobGpu {
-                    pair: i as u32,
-                    tri_first: tri_first + start,
-                    tri_count: n,
-                    slot: flat.jobs.len() as u32 - job_first,
-                });
-                start += n;
-            }
-            flat.pairs.push(PairGpu {
+            let job_first = f.push_jobs(i as u32, tri_first, tri_count, chunk);
+            let pair = PairGpu {
                 a_pos: pose4(p.a_pose.0),
                 a_rot: quat4(p.a_pose.1),
                 b_pos: pose4(p.b_pose.0),
@@ -453,7 +505,7 @@ impl ContactModel {
                 tri_count,
                 sdf_kind,
                 job_first,
-                job_count: flat.jobs.len() as u32 - job_first,
+                job_count: f.flat.jobs.len() as u32 - job_first,
                 sdf_scale,
                 contact_offset: p.contact_offset,
                 radius: p.query.radius,
@@ -464,27 +516,11 @@ impl ContactModel {
                 crowd_template: 0,
                 _pad: [0.0; 2],
                 a_bound: bounding_sphere(p.query.triangles.iter().flatten().copied(), p.query.radius),
-                b_bound: match &p.sdf {
-                    // Shared grids (a pile's parts) are scanned once.
-                    SdfShape::Grid(g) => {
-                        let key = Arc::as_ptr(g);
-                        match grid_bound.iter().find(|(k, _)| *k == key) {
-                            Some(&(_, b)) => b,
-                            None => {
-                                let b = p.sdf.bound();
-                                grid_bound.push((key, b));
-                                b
-                            }
-                        }
-                    }
-                    SdfShape::Thread(t) => {
-                        let [x, y, z, r] = t.bound();
-                        [x, y, z, r + THREAD_BOUND_SLACK * p.contact_offset]
-                    }
-                    other => other.bound(),
-                },
-            });
+                b_bound: f.sdf_bound(p),
+            };
+            f.flat.pairs.push(pair);
         }
+        let mut flat = f.flat;
         if flat.tri_verts.is_empty() {
             flat.tri_verts.push([0.0; 4]);
         }

@@ -4,8 +4,8 @@
 // normal. One invocation per contact slot: the contact point (on shape a) is moved back by the query radius
 // along the patch normal, taken into shape b's frame, and the normalised SDF gradient there is rotated back
 // to the world.
-// Only reduced contacts are sampled (at most 4 x max_patches per pair), yet on lavapipe that was 4-5% of the
-// nut-bolt pair's contact handling per frame (2026-12-03), which the solver, sampling its own, did not need.
+// Only reduced contacts are sampled (at most 4 x max_patches per pair), yet on lavapipe that is 4-5% of the
+// nut-bolt pair's contact handling per frame, which the solver, sampling its own, does not need.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> pairs: array<Pair>;

@@ -106,88 +106,135 @@ pub struct ContactPipeline {
     retry_args: wgpu::Buffer,
 }
 
-impl ContactPipeline {
-    /// Validates the configuration against the model and the device, uploads the model, builds pipelines.
-    pub fn new(gpu: &GpuContext, model: &ContactModel, world_count: u32, cfg: &ContactConfig) -> Result<Self> {
-        cfg.validate()?;
-        let limits = gpu.limits();
-        let need = cfg.workgroup_bytes();
-        if need > limits.max_compute_workgroup_storage_size {
-            return Err(EngineError::Gpu(format!(
-                "max_patches = {} with batches of {} candidates needs {need} bytes of workgroup memory; adapter {:?} offers max_compute_workgroup_storage_size = {}; lower max_patches or candidates_per_invocation",
-                cfg.max_patches, cfg.batch_size(), gpu.info.name, limits.max_compute_workgroup_storage_size
-            )));
-        }
-        if world_count == 0 || world_count > limits.max_compute_workgroups_per_dimension {
-            return Err(EngineError::Config {
-                field: "world_count",
-                value: world_count.to_string(),
-                expected: format!("1..={}", limits.max_compute_workgroups_per_dimension),
-            });
-        }
-        // Jobs short enough for one generate workgroup and few enough per pair for one merge workgroup
-        // within lavapipe's loop limit (see ContactConfig::max_chunk_triangles); the CPU twin uses the
-        // same jobs.
-        let max_jobs = cfg.max_jobs_per_pair();
-        let chunk = if cfg.chunk_triangles == 0 {
-            let longest = model.max_triangles();
-            let fewest_jobs = longest.div_ceil(max_jobs).next_multiple_of(256);
-            let split_for = if cfg.chunk_world_count > 0 { cfg.chunk_world_count } else { world_count };
-            auto_chunk(longest, split_for).min(cfg.max_chunk_triangles()).max(fewest_jobs)
-        } else {
-            cfg.chunk_triangles
-        };
-        let flat = model.flatten_ordered(chunk, cfg.orders_by_normal())?;
-        let too_many_jobs = flat.pairs.iter().find(|p| p.job_count > max_jobs);
-        if chunk > cfg.max_chunk_triangles() || too_many_jobs.is_some() {
-            let triangles = too_many_jobs.map_or(model.max_triangles(), |p| p.tri_count);
-            return Err(EngineError::Config {
-                field: "chunk_triangles",
-                value: chunk.to_string(),
-                expected: format!(
-                    "jobs of at most {} triangles and at most {max_jobs} jobs per pair with these settings (lavapipe's loop limit; a pair has {} query triangles): use fewer triangles per pair, a smaller max_patches or a larger workgroup_size",
-                    cfg.max_chunk_triangles(),
-                    triangles
-                ),
-            });
-        }
-        for (what, bytes) in
-            [("SDF values", flat.sdf_values.len() as u64 * 4), ("query triangles", flat.tri_verts.len() as u64 * 16)]
-        {
-            if bytes > limits.max_storage_buffer_binding_size {
-                return Err(EngineError::TooLarge {
-                    what: format!("the {what} buffer"),
-                    needed_bytes: bytes,
-                    limit_bytes: limits.max_storage_buffer_binding_size,
-                    hint: format!("adapter {:?} limits max_storage_buffer_binding_size; lower the SDF resolution or the mesh size", gpu.info.name),
-                });
-            }
-        }
-        let job_count = flat.jobs.len() as u32;
-        let pair_count = flat.pairs.len() as u32;
-        let p = params(&flat, model.body_count, world_count, cfg);
-        let patch_bytes = std::mem::size_of::<PatchGpu>() as u64;
-        let job_patch_bytes = world_count as u64 * job_count as u64 * cfg.max_patches as u64 * patch_bytes;
-        if job_patch_bytes > limits.max_storage_buffer_binding_size {
+/// Checks the workgroup memory and the world count against the device.
+fn check_device(gpu: &GpuContext, world_count: u32, cfg: &ContactConfig) -> Result<()> {
+    let limits = gpu.limits();
+    let need = cfg.workgroup_bytes();
+    if need > limits.max_compute_workgroup_storage_size {
+        return Err(EngineError::Gpu(format!(
+            "max_patches = {} with batches of {} candidates needs {need} bytes of workgroup memory; adapter {:?} offers max_compute_workgroup_storage_size = {}; lower max_patches or candidates_per_invocation",
+            cfg.max_patches, cfg.batch_size(), gpu.info.name, limits.max_compute_workgroup_storage_size
+        )));
+    }
+    if world_count == 0 || world_count > limits.max_compute_workgroups_per_dimension {
+        return Err(EngineError::Config {
+            field: "world_count",
+            value: world_count.to_string(),
+            expected: format!("1..={}", limits.max_compute_workgroups_per_dimension),
+        });
+    }
+    Ok(())
+}
+
+/// Query triangles per job: jobs short enough for one generate workgroup and few enough per pair for one
+/// merge workgroup within lavapipe's loop limit (see ContactConfig::max_chunk_triangles); the CPU twin uses
+/// the same jobs.
+fn job_chunk(model: &ContactModel, world_count: u32, cfg: &ContactConfig) -> u32 {
+    if cfg.chunk_triangles == 0 {
+        let longest = model.max_triangles();
+        let fewest_jobs = longest.div_ceil(cfg.max_jobs_per_pair()).next_multiple_of(256);
+        let split_for = if cfg.chunk_world_count > 0 { cfg.chunk_world_count } else { world_count };
+        auto_chunk(longest, split_for).min(cfg.max_chunk_triangles()).max(fewest_jobs)
+    } else {
+        cfg.chunk_triangles
+    }
+}
+
+/// Checks the flattened model's jobs and buffer sizes against the settings and the device.
+fn check_flat(
+    gpu: &GpuContext,
+    model: &ContactModel,
+    flat: &FlatModel,
+    chunk: u32,
+    world_count: u32,
+    cfg: &ContactConfig,
+) -> Result<()> {
+    let limits = gpu.limits();
+    let max_jobs = cfg.max_jobs_per_pair();
+    let too_many_jobs = flat.pairs.iter().find(|p| p.job_count > max_jobs);
+    if chunk > cfg.max_chunk_triangles() || too_many_jobs.is_some() {
+        let triangles = too_many_jobs.map_or(model.max_triangles(), |p| p.tri_count);
+        return Err(EngineError::Config {
+            field: "chunk_triangles",
+            value: chunk.to_string(),
+            expected: format!(
+                "jobs of at most {} triangles and at most {max_jobs} jobs per pair with these settings (lavapipe's loop limit; a pair has {} query triangles): use fewer triangles per pair, a smaller max_patches or a larger workgroup_size",
+                cfg.max_chunk_triangles(),
+                triangles
+            ),
+        });
+    }
+    for (what, bytes) in
+        [("SDF values", flat.sdf_values.len() as u64 * 4), ("query triangles", flat.tri_verts.len() as u64 * 16)]
+    {
+        if bytes > limits.max_storage_buffer_binding_size {
             return Err(EngineError::TooLarge {
-                what: format!(
-                    "per-job patch buffer for {world_count} worlds x {job_count} jobs x {} patches",
-                    cfg.max_patches
-                ),
-                needed_bytes: job_patch_bytes,
+                what: format!("the {what} buffer"),
+                needed_bytes: bytes,
                 limit_bytes: limits.max_storage_buffer_binding_size,
-                hint: "use fewer worlds per pipeline, a larger chunk_triangles, or a smaller max_patches".into(),
+                hint: format!(
+                    "adapter {:?} limits max_storage_buffer_binding_size; lower the SDF resolution or the mesh size",
+                    gpu.info.name
+                ),
             });
         }
-        let dev = &gpu.device;
+    }
+    let job_count = flat.jobs.len() as u32;
+    let job_patch_bytes = job_patch_bytes(flat, world_count, cfg);
+    if job_patch_bytes > limits.max_storage_buffer_binding_size {
+        return Err(EngineError::TooLarge {
+            what: format!(
+                "per-job patch buffer for {world_count} worlds x {job_count} jobs x {} patches",
+                cfg.max_patches
+            ),
+            needed_bytes: job_patch_bytes,
+            limit_bytes: limits.max_storage_buffer_binding_size,
+            hint: "use fewer worlds per pipeline, a larger chunk_triangles, or a smaller max_patches".into(),
+        });
+    }
+    Ok(())
+}
+
+/// Bytes of the per-job patches of every world.
+fn job_patch_bytes(flat: &FlatModel, world_count: u32, cfg: &ContactConfig) -> u64 {
+    let patch_bytes = std::mem::size_of::<PatchGpu>() as u64;
+    world_count as u64 * flat.jobs.len() as u64 * cfg.max_patches as u64 * patch_bytes
+}
+
+/// The model and frame buffers that the generate, merge and normals passes bind.
+struct Buffers {
+    uniform: wgpu::Buffer,
+    pairs: wgpu::Buffer,
+    jobs: wgpu::Buffer,
+    tri_verts: wgpu::Buffer,
+    sdf_values: wgpu::Buffer,
+    body_q: wgpu::Buffer,
+    pair_candidates: wgpu::Buffer,
+    patches: wgpu::Buffer,
+    patch_counts: wgpu::Buffer,
+    job_patches: wgpu::Buffer,
+    job_patch_count: wgpu::Buffer,
+}
+
+impl Buffers {
+    /// Uploads the model; with one job per pair (`merges` false) the per-job patches are the final ones.
+    fn new(
+        gpu: &GpuContext,
+        flat: &FlatModel,
+        p: &ParamsGpu,
+        body_count: u32,
+        cfg: &ContactConfig,
+        merges: bool,
+    ) -> Self {
+        let (world_count, job_count, pair_count) = (p.world_count, flat.jobs.len() as u32, flat.pairs.len() as u32);
+        let patch_bytes = std::mem::size_of::<PatchGpu>() as u64;
         let none = wgpu::BufferUsages::empty();
-        let uniform = gpu.uniform_buffer("contact-params", bytemuck::bytes_of(&p));
+        let uniform = gpu.uniform_buffer("contact-params", bytemuck::bytes_of(p));
         let pairs = gpu.storage_buffer("pairs", &flat.pairs, none);
         let jobs = gpu.storage_buffer("jobs", &flat.jobs, none);
         let tri_verts = gpu.storage_buffer("tri_verts", &flat.tri_verts, none);
         let sdf_values = gpu.storage_buffer("sdf_values", &flat.sdf_values, none);
-        let identity =
-            vec![TransformGpu::new(Vec3::ZERO, Quat::IDENTITY); (world_count * model.body_count.max(1)) as usize];
+        let identity = vec![TransformGpu::new(Vec3::ZERO, Quat::IDENTITY); (world_count * body_count.max(1)) as usize];
         let body_q = gpu.storage_buffer("body_q", &identity, none);
         let pair_candidates = gpu.storage_buffer_zeroed("pair_candidates", 4 * (world_count * pair_count) as u64);
         let patches = gpu.storage_buffer_zeroed(
@@ -197,15 +244,88 @@ impl ContactPipeline {
         let patch_counts = gpu.storage_buffer_zeroed("patch_counts", 4 * (world_count * pair_count) as u64);
         // One job per pair: generate writes the final patches (job j is pair j, so the layouts agree) and no
         // merge runs (FlatModel::single_job_pairs).
-        let merges = !flat.single_job_pairs();
         let (job_patches, job_patch_count) = if merges {
             (
-                gpu.storage_buffer_zeroed("job_patches", job_patch_bytes),
+                gpu.storage_buffer_zeroed("job_patches", job_patch_bytes(flat, world_count, cfg)),
                 gpu.storage_buffer_zeroed("job_patch_count", 4 * (world_count * job_count) as u64),
             )
         } else {
             (patches.clone(), patch_counts.clone())
         };
+        Buffers {
+            uniform,
+            pairs,
+            jobs,
+            tri_verts,
+            sdf_values,
+            body_q,
+            pair_candidates,
+            patches,
+            patch_counts,
+            job_patches,
+            job_patch_count,
+        }
+    }
+}
+
+/// The generate passes' bind groups: the first pass's per run of jobs of one SDF kind (each with a uniform
+/// holding the parameters with its first job), then the retry passes' per kind in use.
+fn generate_groups(
+    gpu: &GpuContext,
+    generate: &GenerateKernel,
+    p: &ParamsGpu,
+    b: &Buffers,
+    retry_jobs: &wgpu::Buffer,
+    retry_args: &wgpu::Buffer,
+) -> (Vec<[wgpu::BindGroup; 3]>, Vec<[wgpu::BindGroup; 3]>) {
+    let gen_groups = generate
+        .runs
+        .iter()
+        .map(|&(pi, base, _)| {
+            let gp = &generate.first[pi].1;
+            let run_params =
+                gpu.uniform_buffer("contact-params", bytemuck::bytes_of(&ParamsGpu { job_base: base, ..*p }));
+            gpu.bind_groups(
+                gp,
+                [
+                    &[&run_params, &b.pairs, &b.jobs, &b.tri_verts, &b.sdf_values],
+                    &[&b.body_q],
+                    &[&b.job_patches, &b.job_patch_count, &b.pair_candidates, retry_jobs, retry_args],
+                ],
+            )
+        })
+        .collect();
+    let retry_groups = generate
+        .retry
+        .iter()
+        .map(|(_, rp)| {
+            gpu.bind_groups(
+                rp,
+                [
+                    &[&b.uniform, &b.pairs, &b.jobs, &b.tri_verts, &b.sdf_values],
+                    &[&b.body_q],
+                    &[&b.job_patches, &b.job_patch_count, &b.pair_candidates, retry_jobs],
+                ],
+            )
+        })
+        .collect();
+    (gen_groups, retry_groups)
+}
+
+impl ContactPipeline {
+    /// Validates the configuration against the model and the device, uploads the model, builds pipelines.
+    pub fn new(gpu: &GpuContext, model: &ContactModel, world_count: u32, cfg: &ContactConfig) -> Result<Self> {
+        cfg.validate()?;
+        check_device(gpu, world_count, cfg)?;
+        let chunk = job_chunk(model, world_count, cfg);
+        let flat = model.flatten_ordered(chunk, cfg.orders_by_normal())?;
+        check_flat(gpu, model, &flat, chunk, world_count, cfg)?;
+        let job_count = flat.jobs.len() as u32;
+        let pair_count = flat.pairs.len() as u32;
+        let p = params(&flat, model.body_count, world_count, cfg);
+        let dev = &gpu.device;
+        let merges = !flat.single_job_pairs();
+        let b = Buffers::new(gpu, &flat, &p, model.body_count, cfg, merges);
         let kinds = super::generate::SdfKinds::of(&flat.pairs);
         let subgroups = super::generate::reduce_with_subgroups(gpu, cfg);
         let generate = GenerateKernel::new(dev, cfg, &flat, subgroups);
@@ -214,52 +334,20 @@ impl ContactPipeline {
             "contact_normals",
             world_count as u64 * pair_count as u64 * cfg.max_patches as u64 * 4 * 16,
         );
-        let group = |pipeline: &wgpu::ComputePipeline, index: u32, buffers: &[&wgpu::Buffer]| {
-            gpu.bind_group(pipeline, index, buffers)
-        };
         let (retry_jobs, retry_args) = super::generate::retry_buffers(gpu, job_count, world_count);
-        // Per run of jobs of one SDF kind: the parameters with its first job, and its pipeline's groups.
-        let gen_groups = generate
-            .runs
-            .iter()
-            .map(|&(pi, base, _)| {
-                let gp = &generate.first[pi].1;
-                let run_params =
-                    gpu.uniform_buffer("contact-params", bytemuck::bytes_of(&ParamsGpu { job_base: base, ..p }));
-                [
-                    group(gp, 0, &[&run_params, &pairs, &jobs, &tri_verts, &sdf_values]),
-                    group(gp, 1, &[&body_q]),
-                    group(gp, 2, &[&job_patches, &job_patch_count, &pair_candidates, &retry_jobs, &retry_args]),
-                ]
-            })
-            .collect();
-        let retry_groups = generate
-            .retry
-            .iter()
-            .map(|(_, rp)| {
-                [
-                    group(rp, 0, &[&uniform, &pairs, &jobs, &tri_verts, &sdf_values]),
-                    group(rp, 1, &[&body_q]),
-                    group(rp, 2, &[&job_patches, &job_patch_count, &pair_candidates, &retry_jobs]),
-                ]
-            })
-            .collect();
+        let (gen_groups, retry_groups) = generate_groups(gpu, &generate, &p, &b, &retry_jobs, &retry_args);
         let merge = merges.then(|| {
             let merge = MergeKernel::new(dev, cfg, subgroups);
-            let mp = &merge.pipeline;
-            let groups = [
-                group(mp, 0, &[&uniform, &pairs]),
-                group(mp, 1, &[&job_patches, &job_patch_count]),
-                group(mp, 2, &[&patches, &patch_counts]),
-            ];
+            let groups = gpu.bind_groups(
+                &merge.pipeline,
+                [&[&b.uniform, &b.pairs], &[&b.job_patches, &b.job_patch_count], &[&b.patches, &b.patch_counts]],
+            );
             (merge, groups)
         });
-        let np = &normals.pipeline;
-        let normals_groups = [
-            group(np, 0, &[&uniform, &pairs, &sdf_values]),
-            group(np, 1, &[&body_q, &patches, &patch_counts]),
-            group(np, 2, &[&contact_normals]),
-        ];
+        let normals_groups = gpu.bind_groups(
+            &normals.pipeline,
+            [&[&b.uniform, &b.pairs, &b.sdf_values], &[&b.body_q, &b.patches, &b.patch_counts], &[&contact_normals]],
+        );
         Ok(ContactPipeline {
             cfg: cfg.clone(),
             flat,
@@ -267,12 +355,12 @@ impl ContactPipeline {
             world_count,
             generate,
             merge,
-            body_q,
-            job_patches,
-            job_patch_count,
-            pair_candidates,
-            patches,
-            patch_counts,
+            body_q: b.body_q,
+            job_patches: b.job_patches,
+            job_patch_count: b.job_patch_count,
+            pair_candidates: b.pair_candidates,
+            patches: b.patches,
+            patch_counts: b.patch_counts,
             gen_groups,
             retry_groups,
             retry_jobs,
@@ -280,8 +368,8 @@ impl ContactPipeline {
             contact_normals,
             normals,
             normals_groups,
-            pairs,
-            sdf_values,
+            pairs: b.pairs,
+            sdf_values: b.sdf_values,
         })
     }
 
@@ -296,7 +384,7 @@ impl ContactPipeline {
     /// Records one frame of contact handling (clear counters, generate, merge) into `encoder`. The
     /// per-contact normals that [`read`](Self::read) returns are not part of it: the solver samples its
     /// own at every row, so a stepped frame does not pay for them (normals.wgsl: 4-5% of the nut-bolt
-    /// pair's contact handling, 2026-12-03); `read` computes them.
+    /// pair's contact handling); `read` computes them.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder) {
         encoder.clear_buffer(&self.pair_candidates, 0, None);
         super::generate::clear_retry(encoder, &self.retry_jobs, &self.retry_args);

@@ -23,8 +23,8 @@ pub const DEPTH_BAND: f32 = 0.25;
 /// patch still takes corners up to its deepest contact's distance above it (a tilted box landing).
 /// A patch whose deepest contact is still more than this above the surface is landing, not resting: its
 /// slots take any contact within the offset, so the side that swings down in the frame has one.
-/// Regression (2026-11-22): a ring landing tilted on the ground kept all four slots within 0.3 mm of its
-/// lowest point, and its far side slapped 8 mm into the ground in the next frame (4.4 mm with this rule,
+/// Without this rule a ring landing tilted on the ground keeps all four slots within 0.3 mm of its
+/// lowest point, and its far side slaps 8 mm into the ground in the next frame (4.4 mm with the rule,
 /// `factory-bench scene pile-toruses`).
 pub const MIN_DEPTH_BAND: f32 = 1e-4;
 const UNASSIGNED: u32 = u32::MAX - 1;

@@ -3,10 +3,10 @@
 // in uniform control flow.
 //
 // Why: lavapipe runs each workgroup-memory access lane by lane (one scalar access per lane and component,
-// whichever lanes take it), so in Assign, where every invocation reads every patch normal, 8 lanes paid 8
+// whichever lanes take it), so in Assign, where every invocation reads every patch normal, 8 lanes would pay 8
 // reads for one value. Here each of a subgroup's lanes reads a different patch and the subgroup shares
-// them by shuffles: contact handling of the M16 nut-bolt pair at 64 worlds about 1.1x faster (2026-12-02,
-// docs/BENCHMARKS.md). A subgroup also combines its posts to an atomic before one lane makes it; that is
+// them by shuffles: contact handling of the M16 nut-bolt pair at 64 worlds about 1.1x faster
+// (docs/BENCHMARKS.md). A subgroup also combines its posts to an atomic before one lane makes it; that is
 // neutral on lavapipe and saves atomic contention on a GPU, as Assign's shuffles save shared-memory reads.
 
 // This invocation's lane in its subgroup (counted as the active lanes are: every lane is active where

@@ -3,7 +3,7 @@
 //!
 //! # Rules
 //! Factory (Narang et al., RSS 2022, section III-A) collides shapes through PhysX's SDF collisions, whose
-//! pair rules DESIGN.md section 4.2 restates: *both shapes tagged with an SDF -> SDF-mesh (the shape with more
+//! pair rules docs/ARCHITECTURE.md section 5 restates: *both shapes tagged with an SDF -> SDF-mesh (the shape with more
 //! triangles is the SDF, the other one's triangles are queried); one tagged -> convex-vs-mesh (the untagged
 //! shape's convex hull is queried against the tagged one's SDF); none tagged -> convex-convex; primitives
 //! collide analytically*. Here "tagged" means a mesh carrying Factory's `<sdf resolution="N"/>` URDF tag

@@ -3,16 +3,14 @@
 //! the colouring and bitwise determinism.
 
 use super::{CrowdConfig, CrowdFlat, CrowdFrame, CrowdModel, NearPair, RestState, COLOUR_NONE, UNCOLOURED};
-use crate::contact::generate::{reduce_with_subgroups, shader_source_wg, SdfKinds};
-use crate::contact::model::{PairGpu, ParamsGpu, PatchGpu};
+use crate::contact::model::{PairGpu, PatchGpu};
 use crate::contact::pipeline::to_patches;
 use crate::contact::{ContactConfig, Patch, TransformGpu};
-use crate::error::{EngineError, Result};
-use crate::gpu::{Binding, GpuContext};
-use crate::solver::gpu::{bodies_gpu, solver_constants, solver_params};
+use crate::error::Result;
+use crate::gpu::GpuContext;
 use crate::solver::{BodyModel, BodyState, Control, SolverConfig};
 use bytemuck::{Pod, Zeroable};
-use glam::{Quat, Vec3};
+use glam::Vec3;
 
 const CROWD_COMMON: &str = include_str!("crowd_common.wgsl");
 const NEAR_WGSL: &str = include_str!("near.wgsl");
@@ -147,13 +145,9 @@ fn world_rows_bytes(cfg: &CrowdConfig) -> u64 {
     cfg.max_patches_per_world as u64 * 4 * crate::solver::gpu::ROW_VEC4 * 16
 }
 
-fn too_large(gpu: &GpuContext, what: String, bytes: u64, hint: &str) -> Result<()> {
-    let limit = gpu.limits().max_storage_buffer_binding_size;
-    if bytes > limit {
-        return Err(EngineError::TooLarge { what, needed_bytes: bytes, limit_bytes: limit, hint: hint.into() });
-    }
-    Ok(())
-}
+mod setup;
+
+use setup::{check_sizes, crowd_params, fit_jobs, Kernels, Storage, Uniforms};
 
 impl CrowdPipeline {
     /// Validates the settings against the model and the device, uploads the model, builds the pipelines.
@@ -167,248 +161,17 @@ impl CrowdPipeline {
         solver: &SolverConfig,
     ) -> Result<Self> {
         super::check_setup(model, bodies, cfg, solver)?;
-        let mut flat = CrowdFlat::new(model, contact)?;
-        // Short jobs cull well, but each holds a patch budget of its own: with the default chunk, longer
-        // jobs until the per-job patches fit one binding (an M16 nut's 2872 triangles: 12 jobs of 256 for
-        // 10000 pairs would need 154 MB, 6 of 512 fit).
-        let job_bytes = |f: &CrowdFlat| {
-            world_count as u64
-                * cfg.max_pairs as u64
-                * f.jobs_per_pair as u64
-                * contact.max_patches as u64
-                * std::mem::size_of::<PatchGpu>() as u64
-        };
-        while contact.chunk_triangles == 0
-            && job_bytes(&flat) > gpu.limits().max_storage_buffer_binding_size
-            && flat.jobs_per_pair > 1
-            && 2 * flat.chunk <= contact.max_chunk_triangles()
-        {
-            flat = CrowdFlat::new(model, &ContactConfig { chunk_triangles: 2 * flat.chunk, ..contact.clone() })?;
-        }
+        let flat = fit_jobs(gpu, model, world_count, cfg, contact)?;
         let n = model.body_count;
-        let limits = gpu.limits();
-        let max_dim = limits.max_compute_workgroups_per_dimension;
-        if world_count == 0 || world_count > max_dim {
-            return Err(EngineError::Config {
-                field: "world_count",
-                value: world_count.to_string(),
-                expected: format!("1..={max_dim}"),
-            });
-        }
-        let jobs = flat.jobs_per_pair;
-        if cfg.max_pairs > max_dim {
-            return Err(EngineError::Config {
-                field: "max_pairs",
-                value: cfg.max_pairs.to_string(),
-                expected: format!("at most {max_dim} (workgroups per dispatch dimension)"),
-            });
-        }
-        if contact.workgroup_bytes() > limits.max_compute_workgroup_storage_size {
-            return Err(EngineError::Gpu(format!(
-                "max_patches = {} with batches of {} candidates needs {} bytes of workgroup memory; adapter {:?} offers {}; lower max_patches or candidates_per_invocation",
-                contact.max_patches,
-                contact.batch_size(),
-                contact.workgroup_bytes(),
-                gpu.info.name,
-                limits.max_compute_workgroup_storage_size
-            )));
-        }
-        let (w, cap, mp) = (world_count as u64, cfg.max_pairs as u64, contact.max_patches as u64);
-        let meta_stride = M_HEAD + 4 * n + 9 * cfg.max_pairs;
-        let patch_bytes = std::mem::size_of::<PatchGpu>() as u64;
-        // Then the sleeping state: two vec4 per body (solve.wgsl's rest_index).
-        let scratch_bytes = rest_offset(world_count, n, cfg) + w * n as u64 * 32;
-        let hint = "use fewer worlds per pipeline, a smaller max_pairs, max_patches or max_patches_per_world";
-        too_large(
-            gpu,
-            format!("near-pair job patches ({w} worlds x {cap} pairs x {jobs} jobs x {mp} patches)"),
-            w * cap * jobs as u64 * mp * patch_bytes,
-            hint,
-        )?;
-        too_large(
-            gpu,
-            format!("solver rows ({w} worlds x {} patches x 2 frames)", cfg.max_patches_per_world),
-            scratch_bytes,
-            hint,
-        )?;
-        too_large(gpu, "SDF values".into(), flat.flat.sdf_values.len() as u64 * 4, "lower the SDF resolution")?;
-        too_large(
-            gpu,
-            format!("per-world bookkeeping ({w} worlds x {meta_stride} words)"),
-            w * meta_stride as u64 * 4,
-            hint,
-        )?;
-        too_large(
-            gpu,
-            format!("near-pair records ({w} worlds x {cap} pairs)"),
-            w * cap * std::mem::size_of::<PairGpu>() as u64,
-            hint,
-        )?;
-
-        let params = CrowdParamsGpu {
-            world_count,
-            body_count: n,
-            cap: cfg.max_pairs,
-            jobs_per_pair: jobs,
-            chunk: flat.chunk,
-            class_count: model.class_count,
-            static_count: model.static_count,
-            max_colours: cfg.max_colours,
-            meta_stride,
-            patch_budget: cfg.max_patches_per_world,
-            sleep_frames: cfg.sleep.frames,
-            sleep_distance: cfg.sleep.distance,
-            sleep_half_cos: cfg.sleep.half_cos(),
-            rest_base: (rest_offset(world_count, n, cfg) / 16) as u32,
-            _pad: [0; 2],
-        };
-        let contact_params = ParamsGpu {
-            world_count,
-            body_count: n,
-            pair_count: cfg.max_pairs,
-            job_count: jobs,
-            normal_cos: contact.normal_cos,
-            iterations: contact.iterations,
-            world_offset: 0,
-            job_base: 0,
-        };
-        let sp = solver_params(solver, bodies, world_count, cfg.max_pairs, cfg.max_patches_per_world * 4, 0);
-        let dev = &gpu.device;
-        let cp_buf = gpu.uniform_buffer("crowd-params", bytemuck::bytes_of(&params));
-        let contact_buf = gpu.uniform_buffer("crowd-contact-params", bytemuck::bytes_of(&contact_params));
-        let sp_buf = gpu.uniform_buffer("crowd-solver-params", bytemuck::bytes_of(&sp));
-        // Per-dispatch parameters: the colouring rounds, then 5 solver phases x 32 colours.
-        let pass_stride = (limits.min_uniform_buffer_offset_alignment as u64).max(16);
-        let mut passes = Vec::new();
-        for r in 0..cfg.colour_rounds {
-            passes.push(PassParamsGpu { index: r, bias: 0, _pad: [0; 2] });
-        }
-        for [_, bias, _] in PHASES {
-            for c in 0..32 {
-                passes.push(PassParamsGpu { index: c, bias, _pad: [0; 2] });
-            }
-        }
-        let mut pass_bytes = vec![0u8; passes.len() * pass_stride as usize];
-        for (i, p) in passes.iter().enumerate() {
-            let at = i * pass_stride as usize;
-            pass_bytes[at..at + 16].copy_from_slice(bytemuck::bytes_of(p));
-        }
-        let pass_buf = gpu.uniform_buffer("crowd-passes", &pass_bytes);
-
-        let none = wgpu::BufferUsages::empty();
-        let templates = gpu.storage_buffer("crowd-templates", &flat.flat.pairs, none);
-        let mut rules = model.body_class.clone();
-        rules.extend(&model.body_rule);
-        rules.extend(&model.static_rule);
-        let rules = gpu.storage_buffer("crowd-rules", &rules, none);
-        let tri_verts = gpu.storage_buffer("crowd-tri-verts", &flat.flat.tri_verts, none);
-        let job_bounds = gpu.storage_buffer("crowd-job-bounds", &flat.job_bounds, none);
-        let sdf_values = gpu.storage_buffer("crowd-sdf-values", &flat.flat.sdf_values, none);
-        let identity = vec![TransformGpu::new(Vec3::ZERO, Quat::IDENTITY); (w * n as u64) as usize];
-        let body_q = gpu.storage_buffer("crowd-body-q", &identity, none);
-        let body_qd = gpu.storage_buffer_zeroed("crowd-body-qd", w * n as u64 * 32);
-        let scratch = gpu.storage_buffer_zeroed("crowd-scratch", scratch_bytes);
-        let crowd_pairs = gpu.storage_buffer_zeroed("crowd-pairs", w * cap * std::mem::size_of::<PairGpu>() as u64);
-        let meta = gpu.storage_buffer_zeroed("crowd-meta", w * meta_stride as u64 * 4);
-        let args = dev.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("crowd-args"),
-            size: ARGS_WORDS * 4,
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::INDIRECT
-                | wgpu::BufferUsages::COPY_DST
-                | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let job_patches = gpu.storage_buffer_zeroed("crowd-job-patches", w * cap * jobs as u64 * mp * patch_bytes);
-        let job_patch_count = gpu.storage_buffer_zeroed("crowd-job-patch-count", w * cap * jobs as u64 * 4);
-        let patches = gpu.storage_buffer_zeroed("crowd-patches", w * cap * mp * patch_bytes);
-        let bodies_buf = gpu.storage_buffer("crowd-bodies", &bodies_gpu(bodies), none);
-
-        let ro = Binding::Storage { read_only: true };
-        let rw = Binding::Storage { read_only: false };
-        let kinds = SdfKinds::of(&flat.flat.pairs);
-        let wg = contact.workgroup_size;
-        let per = contact.candidates_per_invocation;
-        let subgroups = reduce_with_subgroups(gpu, contact);
-        let source = |body: &str| {
-            shader_source_wg(&format!("{CROWD_COMMON}\n{body}"), contact.max_patches, wg, per, kinds, subgroups)
-        };
-        let near_layout = gpu.explicit_layout(
-            "crowd-near",
-            &[&[Binding::Uniform, ro, ro], &[ro, ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
-        );
-        let contact_layout = gpu.explicit_layout(
-            "crowd-contacts",
-            &[&[Binding::Uniform, Binding::Uniform, ro, ro, ro], &[ro, ro], &[rw, rw, rw]],
-        );
-        let merge_layout =
-            gpu.explicit_layout("crowd-merge", &[&[Binding::Uniform, Binding::Uniform], &[ro, ro, ro], &[rw, rw]]);
-        let solve_layout = gpu.explicit_layout(
-            "crowd-solve",
-            &[&[Binding::Uniform, Binding::Uniform, ro, ro], &[ro, ro, ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
-        );
-        let near_src = source(NEAR_WGSL);
-        let near: [wgpu::ComputePipeline; 8] = [
-            "keep_keys",
-            "near_count",
-            "near_scan",
-            "near_emit",
-            "incidence",
-            "colour_round",
-            "colour_sort",
-            "near_dormant",
-        ]
-        .map(|e| gpu.pipeline_on(&near_layout, e, &near_src, e));
-        let contacts_src = source(CONTACTS_WGSL);
-        let contacts: [wgpu::ComputePipeline; 2] =
-            ["crowd_generate", "crowd_alloc"].map(|e| gpu.pipeline_on(&contact_layout, e, &contacts_src, e));
-        let merge = gpu.pipeline_on(&merge_layout, "crowd_merge", &source(MERGE_WGSL), "crowd_merge");
-        let solve_src = source(SOLVE_WGSL);
-        let mut constants = solver_constants(solver).to_vec();
-        constants.push(("SLEEP", if cfg.sleep.enabled() { 1.0 } else { 0.0 }));
-        let solve: [wgpu::ComputePipeline; 9] = [
-            "crowd_build_rows",
-            "crowd_velocities",
-            "crowd_pass",
-            "crowd_positions",
-            "crowd_finish",
-            "crowd_pass_resample",
-            "crowd_pass_warm",
-            "crowd_wake",
-            "crowd_sleep",
-        ]
-        .map(|e| gpu.pipeline_on_with(&solve_layout, e, &solve_src, e, &constants));
-        let near_groups = vec![
-            gpu.bind_explicit(&near_layout, 0, &[&cp_buf, &templates, &rules], 0),
-            gpu.bind_explicit(&near_layout, 1, &[&body_q, &scratch], 0),
-            gpu.bind_explicit(&near_layout, 2, &[&crowd_pairs, &meta, &args], 0),
-            gpu.bind_explicit(&near_layout, 3, &[&pass_buf], 16),
-        ];
-        // The colouring rounds are dispatched indirectly from crowd_args, which a dispatch may not also bind
-        // for writing: they get a stand-in (they never touch the arguments).
-        let stand_in = gpu.storage_buffer_zeroed("crowd-args-stand-in", ARGS_WORDS * 4);
-        let round_groups = vec![
-            gpu.bind_explicit(&near_layout, 0, &[&cp_buf, &templates, &rules], 0),
-            gpu.bind_explicit(&near_layout, 1, &[&body_q, &scratch], 0),
-            gpu.bind_explicit(&near_layout, 2, &[&crowd_pairs, &meta, &stand_in], 0),
-            gpu.bind_explicit(&near_layout, 3, &[&pass_buf], 16),
-        ];
-        let contact_groups = vec![
-            gpu.bind_explicit(&contact_layout, 0, &[&contact_buf, &cp_buf, &tri_verts, &sdf_values, &job_bounds], 0),
-            gpu.bind_explicit(&contact_layout, 1, &[&body_q, &crowd_pairs], 0),
-            gpu.bind_explicit(&contact_layout, 2, &[&job_patches, &job_patch_count, &meta], 0),
-        ];
-        let merge_groups = vec![
-            gpu.bind_explicit(&merge_layout, 0, &[&contact_buf, &cp_buf], 0),
-            gpu.bind_explicit(&merge_layout, 1, &[&crowd_pairs, &job_patches, &job_patch_count], 0),
-            gpu.bind_explicit(&merge_layout, 2, &[&meta, &patches], 0),
-        ];
-        let solve_groups = vec![
-            gpu.bind_explicit(&solve_layout, 0, &[&sp_buf, &cp_buf, &sdf_values, &bodies_buf], 0),
-            gpu.bind_explicit(&solve_layout, 1, &[&crowd_pairs, &patches, &meta], 0),
-            gpu.bind_explicit(&solve_layout, 2, &[&body_q, &body_qd, &scratch], 0),
-            gpu.bind_explicit(&solve_layout, 3, &[&pass_buf], 16),
-        ];
+        check_sizes(gpu, &flat, world_count, n, cfg, contact)?;
+        let params = crowd_params(model, &flat, world_count, cfg);
+        let (uniforms, pass_stride) = Uniforms::new(gpu, &params, bodies, cfg, contact, solver);
+        let storage = Storage::new(gpu, model, bodies, &flat, &params, cfg, contact);
+        let kernels = Kernels::new(gpu, &flat, cfg, contact, solver);
+        let [near_groups, round_groups, contact_groups, merge_groups, solve_groups] =
+            kernels.bind_groups(gpu, &uniforms, &storage);
+        let Storage { body_q, body_qd, scratch, crowd_pairs, meta, patches, args, .. } = storage;
+        let Kernels { near, contacts, merge, solve, .. } = kernels;
         Ok(CrowdPipeline {
             flat,
             cfg: cfg.clone(),
@@ -728,6 +491,7 @@ impl CrowdPipeline {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::contact::generate::{shader_source_wg, SdfKinds};
 
     #[test]
     fn crowd_shaders_validate_with_naga() {

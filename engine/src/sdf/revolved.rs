@@ -13,9 +13,9 @@
 //! Why not the baked grid: a grid baked from a faceted mesh carries the facets' normals (a 128-sided 4 mm
 //! peg's normals swing +-1.4 deg about the radial direction), and a peg's moment of inertia about its axis
 //! is ~100 times smaller than about a diameter, so the bore's contact forces spin it about its axis. Dropped
-//! into its frictionless bore (4 mm Table VII pair, 2 x 16 sweeps, patch_iters 8, measured 2026-11-22), the
-//! peg on the grid spins at 0.75 rad/s after 2 s; on this field at 0.07 rad/s. DESIGN 4.1 allows analytic
-//! SDFs for procedural parts; the peg's profile is known exactly.
+//! into its frictionless bore (4 mm Table VII pair, 2 x 16 sweeps, patch_iters 8; measured), the
+//! peg on the grid spins at 0.75 rad/s after 2 s; on this field at 0.07 rad/s. Procedural parts may use
+//! analytic SDFs (docs/ARCHITECTURE.md section 4); the peg's profile is known exactly.
 //! The WGSL twin is revolved.wgsl; both evaluate the same operations in the same order (the on-axis edges
 //! first, then a ring's closing edge).
 

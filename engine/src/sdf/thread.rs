@@ -1,7 +1,7 @@
 //! Analytic signed distance of a threaded bolt: a right-hand helical sweep of the ISO 68-1 trapezoid
-//! profile, clipped to its shank, united with a hexagonal head. DESIGN 4.1 allows analytic SDFs for
-//! procedural parts where they beat the dense grid: here the grid's trilinear interpolation under-estimates
-//! the distance near the concave root corners by 13-31 um at resolution 512-256 (docs/BENCHMARKS.md),
+//! profile, clipped to its shank, united with a hexagonal head. Procedural parts may use analytic SDFs
+//! where they beat the dense grid (docs/ARCHITECTURE.md section 4): here the grid's trilinear interpolation
+//! under-estimates the distance near the concave root corners by 13-31 um at resolution 512-256 (docs/BENCHMARKS.md),
 //! more than the 19 um flank clearance of a tight M16 pair, while the analytic field is exact up to the
 //! lead-angle approximation below, needs no memory and no bake.
 //!

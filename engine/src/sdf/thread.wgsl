@@ -4,8 +4,8 @@
 // An analytic SDF's parameter words (ThreadSdf::to_words, RevolvedSdf::to_words), copied from `sdf_values`
 // once per pair (analytic_load_*; sdf_sample.wgsl sdf_bind) and read at constant indices while sampling.
 // lavapipe reads storage memory one lane and one word at a time, even at a uniform index: reading the 11
-// words per sample from `sdf_values` took 30% of contact generation on the nut-bolt pair (measured
-// 2026-12-02); private words at constant indices stay in registers (on a GPU too). Written out, not looped:
+// words per sample from `sdf_values` costs 30% of contact generation on the nut-bolt pair
+// (measured); private words at constant indices stay in registers (on a GPU too). Written out, not looped:
 // lavapipe counts every loop pass against one budget per invocation (contact/common.wgsl).
 const ANALYTIC_WORDS: u32 = 33u; // REVOLVED_WORDS, the longest block
 var<private> analytic_words: array<u32, ANALYTIC_WORDS>;
@@ -115,8 +115,8 @@ fn hex_prism_sample(apothem: f32, half_edge: f32, z0: f32, z1: f32, p: vec3<f32>
 
 // What thread_sample needs of the words beyond the words themselves, derived once per pair by
 // thread_derive (from sdf_bind) with the same operations it used per sample. Why: lavapipe keeps private
-// values in memory and recomputed these at every sample (8 divisions, a square root; the disassembly of
-// the generate kernel, 2026-12-03); a GPU compiler would hoist them, but not out of the job's loops.
+// values in memory and recomputes these at every sample (8 divisions, a square root; the disassembly of
+// the generate kernel shows it); a GPU compiler would hoist them, but not out of the job's loops.
 struct ThreadDerived {
     lead: f32,       // [m / rad]
     quarter: f32,    // pitch / 4 [m]
@@ -261,7 +261,7 @@ fn len2v(ux: vec4<f32>, uy: vec4<f32>) -> vec4<f32> {
 // Four samples at once (component k of each vector: point k), each the same operations as thread_sample's,
 // so the same bits. Why: on lavapipe a sample is a chain of dependent divisions, square roots and the
 // atan2 polynomial run 8 lanes wide, and the CPU waits on each link (the generate kernel's disassembly under
-// perf, 2026-12-03: its hot instructions are those after vdivps, vsqrtps and vroundps); four independent
+// perf: its hot instructions are those after vdivps, vsqrtps and vroundps); four independent
 // chains side by side let the core overlap them. On a GPU it is the same arithmetic in more registers.
 fn thread_sample4(px: vec4<f32>, py: vec4<f32>, pz: vec4<f32>) -> Sample4 {
     let pitch = tw(0u);

@@ -8,8 +8,9 @@
 //! they make on every body (`LinkDir`), computed once per sample; the kernel recomputes them from the K
 //! blocks at every update, for rows with one link side (a pair of two link bodies is refused: the
 //! pads of one hand never touch, and the kernel stays small enough for lavapipe to compile; written out
-//! for both sides at once its LLVM compile ran past 10 minutes). On a GPU that is arithmetic on values in registers and private memory, where
-//! a cache would be loads from device memory (solver_core.wgsl: on lavapipe too, loads are what cost).
+//! for both sides at once its LLVM compile runs past 10 minutes). On a GPU that is arithmetic on values in
+//! registers and private memory, where a cache would be loads from device memory (solver_core.wgsl: on
+//! lavapipe too, loads are what cost).
 //!
 //! Layout: one invocation per world ([`SOLVER_WG`] per workgroup). Bind group 0 the model: the solver's
 //! uniform, pairs, SDF values and bodies (storage), the articulation's uniform, links and dofs (uniform
@@ -28,12 +29,11 @@
 //! per substep (state between them in storage), which also bounds the work one invocation does.
 //!
 //! On lavapipe (the CPU fallback) control flow does not skip: both sides of a branch run under a lane
-//! mask, and a loop runs its body at least once. Measured at 128 worlds, 4 x 32 sweeps, the arm moving
-//! with no contacts (2026-12-05, machine shared with a training run), the step took 68 ms per frame as
-//! first written; 63 ms with K's column read at constant indices; 48 ms with the links' twists and
-//! impulse tallies at constant indices only (a single run-time index puts a private array in memory); 24
-//! ms with the sweeps visiting only the pairs with patches (every pass over an empty pair ran a rigid and
-//! a link pass, masked). The rigid-only passes alone took 25 ms before the last change.
+//! mask, and a loop runs its body at least once. Hence K's columns, the links' twists and the impulse
+//! tallies are read at constant indices only (a single run-time index puts a private array in memory),
+//! and the sweeps visit only the pairs with patches (a pass over an empty pair would run a rigid and a
+//! link pass, masked); together these make the step about 3 times faster at 128 worlds
+//! (docs/BENCHMARKS.md).
 
 use super::gpu::{
     bodies_gpu, clear_world_rows, control_range, rows_offset, solver_constants, solver_params, write_wrenches,
@@ -164,8 +164,8 @@ impl GpuArticulatedSolver {
     /// Builds the coupled step over `contacts` for bodies `model` (whose link bodies name links of
     /// `art`, [`BodyModel::add_articulated`]). Refuses what [`crate::articulation::gpu::validate`] and
     /// [`super::gpu::GpuSolver::new`] refuse, more than [`MAX_SLOTS`] link bodies, a contact pair between two
-    /// link bodies, and on a software
-    /// adapter a step whose loop passes exceed lavapipe's budget before any contact.
+    /// link bodies, and on a software adapter a step whose loop passes exceed lavapipe's budget before any
+    /// contact.
     pub fn new(
         gpu: &GpuContext,
         contacts: &ContactPipeline,
@@ -178,100 +178,13 @@ impl GpuArticulatedSolver {
         let world_count = contacts.world_count;
         let root = Frame { name: "root".into(), link: 0, offset: (Vec3::ZERO, Quat::IDENTITY) };
         crate::articulation::gpu::validate(art, world_count, &root, cfg.dt, cfg.substeps)?;
-        if model.body_count() as u32 != contacts.body_count {
-            return Err(EngineError::Config {
-                field: "body_count",
-                value: model.body_count().to_string(),
-                expected: format!("the contact model's {} bodies", contacts.body_count),
-            });
-        }
-        let slot_bodies: Vec<usize> = (0..model.body_count()).filter(|&i| model.link(i).is_some()).collect();
-        let slot_links: Vec<u32> = slot_bodies.iter().map(|&i| model.link(i).unwrap()).collect();
-        if slot_bodies.len() > MAX_SLOTS {
-            return Err(EngineError::Config {
-                field: "body_link",
-                value: format!("{} link bodies", slot_bodies.len()),
-                expected: format!("at most {MAX_SLOTS} bodies that are articulation links (the GPU kernel's bound)"),
-            });
-        }
-        if let Some(&l) = slot_links.iter().find(|&&l| l as usize >= art.link_count()) {
-            return Err(EngineError::Config {
-                field: "body_link",
-                value: format!("link {l}"),
-                expected: format!("a link of '{}' (0..{})", art.name, art.link_count()),
-            });
-        }
-        let is_link = |b: u32| b != crate::contact::NO_BODY && model.link(b as usize).is_some();
-        if let Some(p) = contacts.flat.pairs.iter().position(|p| is_link(p.body_a) && is_link(p.body_b)) {
-            return Err(EngineError::Config {
-                field: "pairs",
-                value: format!("pair {p} between two link bodies"),
-                expected: "at most one articulation link per contact pair on the GPU solver (filter the pair, or \
-                           solve on the host with solver::step_cpu_articulated)"
-                    .into(),
-            });
-        }
-        let pair_count = contacts.flat.pairs.len() as u32;
-        if pair_count as usize > MAX_PAIRS {
-            return Err(EngineError::Config {
-                field: "pairs",
-                value: format!("{pair_count} contact pairs per world"),
-                expected: format!("at most {MAX_PAIRS} (articulated.wgsl's MAX_PAIRS)"),
-            });
-        }
+        let (slot_bodies, slot_links, pair_count) = link_slots(contacts, model, art)?;
         let max_rows = (pair_count * contacts.cfg.max_patches * 4).max(1);
         let art_passes = art_loop_passes(art, &slot_links);
-        // lavapipe's loop budget (GpuSolver::new): refused here only what no frame could take.
-        let loop_budget = if gpu.is_software() { crate::contact::LOOP_ITERATION_LIMIT / 8 * 7 } else { 0 };
-        if loop_budget > 0 {
-            let (pairs, bodies) = (pair_count as u64 + 1, model.body_count() as u64 + 1);
-            let sweeps = (cfg.pos_iters + cfg.vel_iters + 1) as u64;
-            // The first substep's dispatch, which also builds the rows.
-            let passes = 4 * pairs + (sweeps * (pairs + 2) + 4 * pairs + 2 * bodies + 1) + bodies + art_passes + 2;
-            if passes > loop_budget as u64 {
-                return Err(EngineError::Config {
-                    field: "substeps x (pos_iters + vel_iters) x pairs",
-                    value: format!(
-                        "({} + {}) x {pair_count} = {passes} loop passes per substep with the articulation, before any contact",
-                        cfg.pos_iters, cfg.vel_iters
-                    ),
-                    expected: format!(
-                        "at most {loop_budget} on a software adapter (llvmpipe's loop limit); use fewer iterations or shape pairs per world"
-                    ),
-                });
-            }
-        }
+        let loop_budget = loop_budget(gpu, model, cfg, pair_count, art_passes)?;
         let n = art.dof_count() as u32;
-        let joint_vec4s = n.div_ceil(4).max(1);
-        let rows_end =
-            rows_offset(world_count, contacts.body_count) + world_count as u64 * max_rows as u64 * ROW_VEC4 * 16;
-        let joint_plane = world_count * joint_vec4s;
-        let scratch_bytes = rows_end + 4 * joint_plane as u64 * 16;
-        if scratch_bytes > gpu.limits().max_storage_buffer_binding_size {
-            return Err(EngineError::TooLarge {
-                what: format!("solver rows and joints for {world_count} worlds x {max_rows} contacts"),
-                needed_bytes: scratch_bytes,
-                limit_bytes: gpu.limits().max_storage_buffer_binding_size,
-                hint: "use fewer worlds per pipeline or a smaller max_patches".into(),
-            });
-        }
-        let mut slot_body = [0u32; 4];
-        let mut slot_link = [0u32; 4];
-        for (s, (&b, &l)) in slot_bodies.iter().zip(&slot_links).enumerate() {
-            slot_body[s] = b as u32;
-            slot_link[s] = l;
-        }
-        let coupling = CouplingGpu {
-            slot_count: slot_bodies.len() as u32,
-            joint_base: (rows_end / 16) as u32,
-            joint_plane,
-            joint_vec4s,
-            slot_body,
-            slot_link,
-            art_passes: art_passes.min(u32::MAX as u64) as u32,
-            substep: 0,
-            _pad: [0; 2],
-        };
+        let (coupling, scratch_bytes) =
+            coupling_layout(gpu, contacts, n, max_rows, (&slot_bodies, &slot_links), art_passes)?;
         let sp = solver_params(cfg, model, world_count, pair_count, max_rows, loop_budget);
         let mut bodies: Vec<BodyGpu> = bodies_gpu(model);
         for (s, &b) in slot_bodies.iter().enumerate() {
@@ -282,28 +195,15 @@ impl GpuArticulatedSolver {
         links.resize(MAX_LINKS, LinkGpu::zeroed());
         let mut dofs = dofs_gpu(art);
         dofs.resize(MAX_DOFS, DofGpu::zeroed());
-        let params = |drives: bool| ArticulationParamsGpu {
-            world_count,
-            link_count: art.link_count() as u32,
-            dof_count: n,
-            frame_link: 0,
-            frame_p: [0.0; 4],
-            frame_q: [0.0, 0.0, 0.0, 1.0],
-            gravity: art.gravity.extend(0.0).to_array(),
-            dt: cfg.dt,
-            substeps: cfg.substeps,
-            drives: drives as u32,
-            dynamics_stride: 0,
-            jacobian_offset: 0,
-            mass_offset: 0,
-            gravity_offset: 0,
-            coriolis_offset: 0,
-        };
         let none = wgpu::BufferUsages::empty();
         let sp_buf = gpu.uniform_buffer("articulated-solver-params", bytemuck::bytes_of(&sp));
         let bodies_buf = gpu.storage_buffer("articulated-bodies", &bodies, none);
-        let art_params =
-            [false, true].map(|on| gpu.uniform_buffer("articulated-art-params", bytemuck::bytes_of(&params(on))));
+        let art_params = [false, true].map(|on| {
+            gpu.uniform_buffer(
+                "articulated-art-params",
+                bytemuck::bytes_of(&articulation_params(art, cfg, world_count, on)),
+            )
+        });
         let links_buf = gpu.uniform_buffer("articulated-links", bytemuck::cast_slice(&links));
         let dofs_buf = gpu.uniform_buffer("articulated-dofs", bytemuck::cast_slice(&dofs));
         let coupling_bufs: Vec<wgpu::Buffer> = (0..cfg.substeps)
@@ -553,6 +453,160 @@ impl GpuArticulatedSolver {
             ArticulationState { joint_q: unpack(&joints[..plane_f]), joint_qd: unpack(&joints[plane_f..2 * plane_f]) };
         let ok = status.iter().map(|s| s[0] == 1.0).collect();
         (BodyState { body_q: q[..n].to_vec(), body_qd: crate::gpu::unpack_vec3_pairs(&qd[..2 * n]) }, art, ok)
+    }
+}
+
+/// The coupling's link bodies (in slot order) and their links, and the contact pairs per world; refuses
+/// a body model that is not the contact model's, more than [`MAX_SLOTS`] link bodies, a link outside `art`,
+/// a pair between two link bodies and more than [`MAX_PAIRS`] pairs.
+fn link_slots(
+    contacts: &ContactPipeline,
+    model: &BodyModel,
+    art: &ArticulationModel,
+) -> Result<(Vec<usize>, Vec<u32>, u32)> {
+    if model.body_count() as u32 != contacts.body_count {
+        return Err(EngineError::Config {
+            field: "body_count",
+            value: model.body_count().to_string(),
+            expected: format!("the contact model's {} bodies", contacts.body_count),
+        });
+    }
+    let slot_bodies: Vec<usize> = (0..model.body_count()).filter(|&i| model.link(i).is_some()).collect();
+    let slot_links: Vec<u32> = slot_bodies.iter().map(|&i| model.link(i).unwrap()).collect();
+    if slot_bodies.len() > MAX_SLOTS {
+        return Err(EngineError::Config {
+            field: "body_link",
+            value: format!("{} link bodies", slot_bodies.len()),
+            expected: format!("at most {MAX_SLOTS} bodies that are articulation links (the GPU kernel's bound)"),
+        });
+    }
+    if let Some(&l) = slot_links.iter().find(|&&l| l as usize >= art.link_count()) {
+        return Err(EngineError::Config {
+            field: "body_link",
+            value: format!("link {l}"),
+            expected: format!("a link of '{}' (0..{})", art.name, art.link_count()),
+        });
+    }
+    let is_link = |b: u32| b != crate::contact::NO_BODY && model.link(b as usize).is_some();
+    if let Some(p) = contacts.flat.pairs.iter().position(|p| is_link(p.body_a) && is_link(p.body_b)) {
+        return Err(EngineError::Config {
+            field: "pairs",
+            value: format!("pair {p} between two link bodies"),
+            expected: "at most one articulation link per contact pair on the GPU solver (filter the pair, or \
+                       solve on the host with solver::step_cpu_articulated)"
+                .into(),
+        });
+    }
+    let pair_count = contacts.flat.pairs.len() as u32;
+    if pair_count as usize > MAX_PAIRS {
+        return Err(EngineError::Config {
+            field: "pairs",
+            value: format!("{pair_count} contact pairs per world"),
+            expected: format!("at most {MAX_PAIRS} (articulated.wgsl's MAX_PAIRS)"),
+        });
+    }
+    Ok((slot_bodies, slot_links, pair_count))
+}
+
+/// lavapipe's loop budget per invocation (0 on a hardware adapter), checked against the first substep's
+/// dispatch with no contact (it also builds the rows; [`super::gpu::GpuSolver::new`]): refused here only what
+/// no frame could take.
+fn loop_budget(
+    gpu: &GpuContext,
+    model: &BodyModel,
+    cfg: &SolverConfig,
+    pair_count: u32,
+    art_passes: u64,
+) -> Result<u32> {
+    let loop_budget = if gpu.is_software() { crate::contact::LOOP_ITERATION_LIMIT / 8 * 7 } else { 0 };
+    if loop_budget > 0 {
+        let (pairs, bodies) = (pair_count as u64 + 1, model.body_count() as u64 + 1);
+        let sweeps = (cfg.pos_iters + cfg.vel_iters + 1) as u64;
+        // The first substep's dispatch, which also builds the rows.
+        let passes = 4 * pairs + (sweeps * (pairs + 2) + 4 * pairs + 2 * bodies + 1) + bodies + art_passes + 2;
+        if passes > loop_budget as u64 {
+            return Err(EngineError::Config {
+                field: "substeps x (pos_iters + vel_iters) x pairs",
+                value: format!(
+                    "({} + {}) x {pair_count} = {passes} loop passes per substep with the articulation, before any contact",
+                    cfg.pos_iters, cfg.vel_iters
+                ),
+                expected: format!(
+                    "at most {loop_budget} on a software adapter (llvmpipe's loop limit); use fewer iterations or shape pairs per world"
+                ),
+            });
+        }
+    }
+    Ok(loop_budget)
+}
+
+/// The coupling uniform (the joints after the rows in the scratch buffer) and the scratch buffer's size
+/// [bytes] for `n` joints and `max_rows` rows per world; refuses a scratch buffer over the device's binding
+/// limit.
+fn coupling_layout(
+    gpu: &GpuContext,
+    contacts: &ContactPipeline,
+    n: u32,
+    max_rows: u32,
+    (slot_bodies, slot_links): (&[usize], &[u32]),
+    art_passes: u64,
+) -> Result<(CouplingGpu, u64)> {
+    let world_count = contacts.world_count;
+    let joint_vec4s = n.div_ceil(4).max(1);
+    let rows_end = rows_offset(world_count, contacts.body_count) + world_count as u64 * max_rows as u64 * ROW_VEC4 * 16;
+    let joint_plane = world_count * joint_vec4s;
+    let scratch_bytes = rows_end + 4 * joint_plane as u64 * 16;
+    if scratch_bytes > gpu.limits().max_storage_buffer_binding_size {
+        return Err(EngineError::TooLarge {
+            what: format!("solver rows and joints for {world_count} worlds x {max_rows} contacts"),
+            needed_bytes: scratch_bytes,
+            limit_bytes: gpu.limits().max_storage_buffer_binding_size,
+            hint: "use fewer worlds per pipeline or a smaller max_patches".into(),
+        });
+    }
+    let mut slot_body = [0u32; 4];
+    let mut slot_link = [0u32; 4];
+    for (s, (&b, &l)) in slot_bodies.iter().zip(slot_links).enumerate() {
+        slot_body[s] = b as u32;
+        slot_link[s] = l;
+    }
+    let coupling = CouplingGpu {
+        slot_count: slot_bodies.len() as u32,
+        joint_base: (rows_end / 16) as u32,
+        joint_plane,
+        joint_vec4s,
+        slot_body,
+        slot_link,
+        art_passes: art_passes.min(u32::MAX as u64) as u32,
+        substep: 0,
+        _pad: [0; 2],
+    };
+    Ok((coupling, scratch_bytes))
+}
+
+/// The articulation's uniform for the kernel, with the joint drives off or on.
+fn articulation_params(
+    art: &ArticulationModel,
+    cfg: &SolverConfig,
+    world_count: u32,
+    drives: bool,
+) -> ArticulationParamsGpu {
+    ArticulationParamsGpu {
+        world_count,
+        link_count: art.link_count() as u32,
+        dof_count: art.dof_count() as u32,
+        frame_link: 0,
+        frame_p: [0.0; 4],
+        frame_q: [0.0, 0.0, 0.0, 1.0],
+        gravity: art.gravity.extend(0.0).to_array(),
+        dt: cfg.dt,
+        substeps: cfg.substeps,
+        drives: drives as u32,
+        dynamics_stride: 0,
+        jacobian_offset: 0,
+        mass_offset: 0,
+        gravity_offset: 0,
+        coriolis_offset: 0,
     }
 }
 

@@ -134,7 +134,7 @@ struct LinkCtx {
 // The pass's K_{s, ls} for every slot s, at 4 s (linear <- force, linear <- torque, angular <- force,
 // angular <- torque): copied out of kblk once per pass (link_ctx) and read at constant indices from then
 // on. Kept out of LinkCtx: passed by value through the row functions, a context holding these 16 matrices
-// made each pass over a pair cost several times its rows on lavapipe (2026-12-05).
+// makes each pass over a pair cost several times its rows on lavapipe.
 var<private> lk: array<mat3x3<f32>, 16>;
 
 fn link_ctx(c: PairCtx, ls: u32, sign: f32) -> LinkCtx {
@@ -258,7 +258,7 @@ fn slot_response(s: u32, u: Sv) -> Sv {
 }
 
 // Fills dir_w for direction d (not necessarily unit) and returns the link side's part of the inverse
-// effective mass along d, u . K_{ls, ls} u with u its spatial impulse (solver/mod.rs Step::eff).
+// effective mass along d, u . K_{ls, ls} u with u its spatial impulse (solver/rows.rs Step::eff).
 fn link_response(l: LinkCtx, ra: vec3<f32>, rb: vec3<f32>, d: vec3<f32>) -> f32 {
     let u = Sv(l.sign * d, l.sign * cross(link_lever(l, ra, rb), d));
     var own = 0.0;
@@ -432,8 +432,8 @@ fn link_pair_pass(world: u32, p: u32, first: u32, count: u32, h: f32, bias: bool
     var vla = vel_load(c.da);
     var vlb = vel_load(c.db);
     // One loop over (patch, pass), not a loop of passes inside a loop of patches: lavapipe runs a loop's
-    // body at least once under a lane mask, so an inner loop ran all its passes, masked, for pairs without
-    // patches, and for every rigid pair (whose pass runs this function masked).
+    // body at least once under a lane mask, so an inner loop would run all its passes, masked, for pairs
+    // without patches, and for every rigid pair (whose pass runs this function masked).
     let per_patch = select(LINK_PATCH_ITERS, 1u, warm);
     let total = count * per_patch;
     var it = 0u;
@@ -658,8 +658,8 @@ fn store_slot_twist(first: u32, s: u32, lin: vec3<f32>, ang: vec3<f32>) {
 }
 
 // One substep per dispatch (the host dispatches sp.substeps per frame, coupling.substep = 0, 1, ...): lavapipe
-// budgets loop passes per invocation, and a frame of 4 substeps of 32 sweeps with the articulation passed
-// it once the nut's thread was in contact (the world was then skipped, frozen). The first substep builds the
+// budgets loop passes per invocation, and a frame of 4 substeps of 32 sweeps with the articulation passes
+// it once the nut's thread is in contact (the world would then be skipped, frozen). The first substep builds the
 // frame's rows; between dispatches the state waits in storage (joints in solver_scratch, bodies in body_q
 // and body_qd, impulses in the rows), and everything a substep derives (link Jacobians, K, the links'
 // twists) it derives afresh, as the host does.

@@ -68,8 +68,8 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>) {
     let n_rows = build_rows(world, row0, frame);
     let first = world * sp.body_count;
     // Substeps (at least 1), bodies (at least 1) and sweeps loop with the exit test at the end of the pass
-    // (see sweep): with tests at the top, lavapipe ran every substep's whole body once more, masked, and a
-    // masked sweep after each run of sweeps (2026-12-03, docs/BENCHMARKS.md).
+    // (see sweep): with tests at the top, lavapipe runs every substep's whole body once more, masked, and a
+    // masked sweep after each run of sweeps (docs/BENCHMARKS.md).
     var sub = 0u;
     loop {
         integrate_bodies(first, h, false);

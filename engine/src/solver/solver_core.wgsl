@@ -47,12 +47,12 @@ struct Row {
 
 // Coulomb's cone on each patch's total normal impulse (SolverConfig::friction_per_patch), set when the
 // pipeline is built: lavapipe runs both sides of every branch, so as a uniform flag the per-patch share's
-// 8 storage reads ran, masked, in every row update.
+// 8 storage reads would run, masked, in every row update.
 override FRICTION_PER_PATCH: bool = false;
 // SolverConfig::patch_iters (also in sp.patch_iters for the loop budget), a constant of the pipeline: with
-// a run-time bound, lavapipe ran the re-sweep loop's body (four rows), masked, once per patch even where
-// patch_iters is 1 (a loop's body runs once more after its last pass; contact/common.wgsl), which made a
-// sweep cost about twice its rows (2026-12-03, docs/BENCHMARKS.md).
+// a run-time bound, lavapipe runs the re-sweep loop's body (four rows), masked, once per patch even where
+// patch_iters is 1 (a loop's body runs once more after its last pass; contact/common.wgsl), which makes a
+// sweep cost about twice its rows (docs/BENCHMARKS.md).
 override PATCH_ITERS: u32 = 1u;
 
 // vec4s per row in solver_scratch (solver/gpu.rs ROW_VEC4).
@@ -190,12 +190,12 @@ fn friction_row(da: Dyn, db: Dyn, va: ptr<function, Vel>, vb: ptr<function, Vel>
 // What a pass over one pair's rows reads once: the pair, its bodies' poses, responses and velocities (the
 // velocities are carried from row to row in registers and written back at the end of the pass). The
 // poses stand still during a sweep, so this is bitwise what reading them at every row would give: on a
-// software adapter every storage access is a bounds-checked gather, and the solver spent most of its time
-// re-reading these: M16 nut-bolt (48 segments per turn), 256 worlds, 2026-12-02: 73 ms of solve per frame
-// against 258-271 ms when every row re-read them and every impulse re-read and wrote the velocities;
-// against 190-212 ms when only the velocities stayed in registers per row; caching each row's lever arms
-// and effective masses and each body's world inertia in the scratch buffer made it slower (365-436 ms):
-// loads, not arithmetic, are what cost.
+// software adapter every storage access is a bounds-checked gather, and re-reading these is where a
+// solver's time goes. On the M16 nut-bolt at 256 worlds, reading them once per pass makes the solve about
+// 3.5 times faster than re-reading them at every row and impulse, and 2.5 times faster than keeping only
+// the velocities in registers per row; caching each row's lever arms and effective masses and each body's
+// world inertia in the scratch buffer is slower still: loads, not arithmetic, are what cost
+// (docs/BENCHMARKS.md).
 struct PairCtx {
     pair: Pair,
     va: BodyView,

@@ -35,8 +35,8 @@ fn sweep(world: u32, row0: u32, h: f32, bias: bool, warm: bool) {
 
 // Samples every row's SDF at the world's current poses. The poses stand still during the sweeps that
 // follow, so this is what their first sweep did in-line, bitwise; done apart, the sweeps' flags are
-// constants: lavapipe runs both sides of every branch, so a sweep that took a run-time resample flag ran
-// the sampling code, masked, in every one of its 20 iterations (and each sweep inlined it).
+// constants: lavapipe runs both sides of every branch, so a sweep that took a run-time resample flag would
+// run the sampling code, masked, in every one of its 20 iterations (and each sweep would inline it).
 fn resample_rows(world: u32, row0: u32) {
     let n = sweep_pair_count(world);
     if (n == 0u) {

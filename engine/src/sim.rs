@@ -5,12 +5,16 @@
 //! bodies' poses in the state always follow the joints (forward kinematics), so the contact pipeline sees
 //! the fingers where the joints put them.
 //!
+//! It sits above the layers it combines: the articulation ([`crate::articulation`]), the scene builder
+//! ([`crate::builder`]), the contact pipeline ([`crate::contact`]) and the solvers ([`crate::solver`]);
+//! none of them refers back to it.
+//!
 //! On the device the state still comes back to the host every frame (bodies and joints: a few KiB), so
 //! the host may read and edit it between frames as with the host solve; the contacts and the warm-start
 //! rows stay on the device ([`ArticulatedSim::read_contacts`] reads the contacts when asked).
 
-use super::dynamics::forward_kinematics;
-use super::{ArticulationControl, ArticulationModel, ArticulationState};
+use crate::articulation::dynamics::forward_kinematics;
+use crate::articulation::{ArticulationControl, ArticulationModel, ArticulationState};
 use crate::builder::Model;
 use crate::contact::{ContactConfig, ContactPipeline, ContactsHost, TransformGpu};
 use crate::error::{EngineError, Result};
