@@ -4,8 +4,8 @@
 //! ([`ArticulationGpu::world_dynamics`]: the fingertip frame's pose, twist and geometric Jacobian, M and g;
 //! [`ArticulationGpu::joint_q`], [`ArticulationGpu::joint_qd`]) and writes [`ArticulationGpu::joint_tau`],
 //! which the articulation's step reads: the control loop stays on the device, the first piece of a
-//! device-resident Franka env (DESIGN.md 5). [`TaskSpaceController::compute`] is its CPU reference, law for
-//! law and operation for operation (`tests/task_space_gpu.rs` checks the two on the Franka).
+//! device-resident Franka env (docs/ARCHITECTURE.md section 7). [`TaskSpaceController::compute`] is its CPU
+//! reference, law for law and operation for operation (`tests/task_space_gpu.rs` checks the two on the Franka).
 //!
 //! [`TaskSpaceController::compute`]: crate::TaskSpaceController
 //!
@@ -17,7 +17,7 @@
 //! about 1 KiB) lives in private arrays, which a GPU keeps in thread-local memory (cached in L1): the
 //! arithmetic (~2.5k flops for OSC on the Franka) is latency-bound and needs many worlds to fill a GPU.
 //!
-//! Only the geometric Jacobian for now (Factory's default); an analytic-Jacobian controller is refused by
+//! Only the geometric Jacobian (Factory's default); an analytic-Jacobian controller is refused by
 //! name.
 
 use bytemuck::{Pod, Zeroable};

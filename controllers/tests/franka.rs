@@ -5,13 +5,13 @@
 
 use factory_controllers::{build, ArmBatch, Controller, ControllerConfig, Targets};
 use factory_engine::articulation::dynamics::step_cpu;
-use factory_engine::articulation::sim::ArticulatedSim;
 use factory_engine::articulation::{ArticulationControl, ArticulationModel, ArticulationState, Frame};
 use factory_engine::builder::ModelBuilder;
 use factory_engine::contact::roles::ShapeGeometry;
 use factory_engine::contact::{ContactConfig, TransformGpu};
 use factory_engine::gpu::GpuContext;
 use factory_engine::sdf::cache::SdfCache;
+use factory_engine::sim::ArticulatedSim;
 use factory_engine::solver::{BodyState, Control, SolverConfig};
 use factory_engine::urdf::{load_urdf, UrdfModel};
 use glam::{Quat, Vec3};
@@ -19,7 +19,7 @@ use std::path::PathBuf;
 
 const DT: f32 = 1.0 / 60.0;
 const SUBSTEPS: u32 = 2;
-/// IsaacGymEnvs' Pick reset pose (reference section 1.7), fingers 2 cm open.
+/// IsaacGymEnvs' Pick reset pose (FactoryTaskNutBoltPick.yaml), fingers 2 cm open.
 const Q_PICK: [f32; 9] = [0.3413, -0.8011, -0.0670, -1.8299, 0.0266, 1.0185, 1.0927, 0.02, 0.02];
 /// Factory's Screw reset pose (the hand points straight down), fingers closed.
 const Q_SCREW: [f32; 9] = [1.5178e-3, -0.19651, -1.4364e-3, -1.9761, -2.7717e-4, 1.7796, 0.78556, 0.0, 0.0];
@@ -28,7 +28,7 @@ fn franka() -> (UrdfModel, ArticulationModel) {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/franka/franka_panda.urdf");
     let urdf = load_urdf(&path).unwrap();
     let mut m = ArticulationModel::from_urdf(&urdf, (Vec3::ZERO, Quat::IDENTITY), Vec3::new(0.0, 0.0, -9.81)).unwrap();
-    // IsaacGymEnvs' Factory: armature 0.01 on every joint (reference section 1.2).
+    // IsaacGymEnvs' Factory: armature 0.01 on every joint (factory_base.py's Franka asset options).
     m.set_armature(0.01);
     (urdf, m)
 }
@@ -86,11 +86,11 @@ fn reach(ctrl: &dyn Controller, seconds: f32, pos_tol: f32, rot_tol: f32) -> (Op
     (settled_at, last.0, last.1)
 }
 
-/// Issue 21: each motion controller reaches a 10 cm / 30 degree free-space target within a stated time and
+/// Each motion controller reaches a 10 cm / 30 degree free-space target within a stated time and
 /// error. Gains: IsaacGymEnvs' joint-space ID and OSC gains scaled for an arm with gravity (compensated)
-/// and without its added damping; IndustReal's task-space impedance gains (reference section 1.10); joint-
-/// space IK with per-joint gains kept within what an explicit PD on the light wrist joints allows at
-/// h = 1/120 s (kd h / I < 2).
+/// and without its added damping; IndustReal's task-space impedance gains (IsaacGymEnvs' IndustReal task
+/// configs); joint-space IK with per-joint gains kept within what an explicit PD on the light wrist joints
+/// allows at h = 1/120 s (kd h / I < 2).
 #[test]
 fn motion_controllers_reach_a_10_cm_30_degree_target() {
     // (config, time bound [s], position tolerance [m], rotation tolerance [rad])
@@ -208,7 +208,7 @@ fn steady_z(trace: &[(f32, Vec3, Vec3)]) -> (f32, f32) {
     (mean, tail.iter().map(|x| (x.1.z - mean).abs()).fold(0.0, f32::max))
 }
 
-/// Issue 21: open-loop and closed-loop force controllers press the fingertip on the table at 5 N within 5%
+/// The open-loop and closed-loop force controllers press the fingertip on the table at 5 N within 5%
 /// at steady state. The target wrench is the force the fingertip applies: 5 N down, (0, 0, -5).
 #[test]
 fn force_controllers_press_the_table_with_5_n() {
@@ -229,7 +229,7 @@ fn force_controllers_press_the_table_with_5_n() {
     }
 }
 
-/// Issue 21: the hybrid controller holds 5 N along z while tracking an xy path (a 4 cm circle in 8 s)
+/// The hybrid controller holds 5 N along z while tracking an xy path (a 4 cm circle in 8 s)
 /// with OSC on x, y and the rotations. The pads slide on the table with Coulomb friction (mu 0.65 of the
 /// pads' 1.0 and the table's 0.3): a P law without integral lags by mu F_n / (Lambda kp), about 3.3 N /
 /// (0.95 kg x 1000 / s^2) = 3.5 mm along x (measured 3.5 mm at the end); along y the pads' friction is

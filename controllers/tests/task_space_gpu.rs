@@ -123,7 +123,7 @@ fn every_task_space_law_matches_its_cpu_reference() {
             law.replace('\n', "; ")
         );
         // f32 rounding in another order (sums, atan2, OSC's Cholesky and 6 x 6 solves): measured 0 to 9.3e-5
-        // on lavapipe (2026-12-05).
+        // on lavapipe.
         assert!(worst < 5e-4, "{law}: device and host torques differ by {worst} (relative)");
         assert!(scale > 1.0, "{law}: the torques are not trivially zero");
     }
