@@ -1,6 +1,7 @@
 //! Device-resident envs: the [`DeviceEnv`] plugin trait, whose observations, rewards and done flags are burn
 //! tensors on the learner's device and whose actions are read there, so a rollout needs no per-step transfer
-//! between host and device (the "observations and actions never leave the device").
+//! between host and device: observations and actions never leave the device. The module is the cargo feature
+//! `device` (burn is a dependency only with it).
 //!
 //! Semantics are [`Env`](crate::Env)'s (Gymnasium vector envs, same-step autoreset): every
 //! [`DeviceEnv::step`] advances all worlds, reports terminated / truncated / success per world, and resets the

@@ -8,11 +8,13 @@
 
 use serde::{Deserialize, Serialize};
 
+#[cfg(feature = "device")]
 use crate::device::DeviceEnv;
 use crate::env::Env;
 use crate::error::{EnvError, Result};
 use crate::franka::nut_bolt::{FrankaNutBolt, FrankaNutBoltConfig};
 use crate::point_mass::{PointMass, PointMassConfig};
+#[cfg(feature = "device")]
 use crate::point_mass_device::PointMassDevice;
 
 /// The registered envs' `type` names.
@@ -72,7 +74,8 @@ pub fn build(cfg: &EnvConfig, env_count: usize, seed: u64) -> Result<Box<dyn Env
 /// Builds the device-resident implementation of the env a config describes on `device`, where it has one:
 /// `point_mass` on any device; `franka_nut_bolt` on burn's wgpu runtime over the engine's device (built with
 /// the `wgpu` feature, and unless its config asks for `solve = "host"`). None elsewhere (the host env then
-/// runs: on a CPU learner it is the faster, DESIGN.md 1).
+/// runs: on a CPU learner it is the faster). Needs the `device` feature.
+#[cfg(feature = "device")]
 pub fn build_device(
     cfg: &EnvConfig,
     env_count: usize,
@@ -93,14 +96,14 @@ fn franka_device(
     device: &burn::prelude::Device,
 ) -> Result<Option<Box<dyn DeviceEnv>>> {
     use crate::franka::device_env::{is_wgpu, FrankaNutBoltDevice};
-    use factory_engine::articulation::sim::CoupledSolve;
+    use factory_engine::sim::CoupledSolve;
     if c.solve == CoupledSolve::Host || !is_wgpu(device) {
         return Ok(None);
     }
     Ok(Some(Box::new(FrankaNutBoltDevice::new(c, env_count, seed, device)?)))
 }
 
-#[cfg(not(feature = "wgpu"))]
+#[cfg(all(feature = "device", not(feature = "wgpu")))]
 fn franka_device(
     _: &FrankaNutBoltConfig,
     _: usize,

@@ -141,7 +141,7 @@ fn the_hand_screws_the_nut_down_without_climbing_it() {
 
 /// The Screw task is solvable in the env's physics: a constant clockwise yaw (a = -0.6) with no other action
 /// screws the nut from the first thread down to its seat (within one pitch: success) inside 2000 steps
-/// (33 s; measured: success at step 1609, 2026-12-04), the fingertip riding down with it. Regression test
+/// (33 s; measured: success at step 1609), the fingertip riding down with it. Regression test
 /// for the pads creeping up the nut under a 24 N squeeze: every constant action failed after 14-21 mm.
 #[test]
 fn a_constant_clockwise_yaw_seats_the_nut() {
@@ -218,7 +218,7 @@ fn table_iii_resets_are_stable_grasps() {
 
 /// Factory's start, the nut resting on the bolt's tip (the default), on ISO 4753's chamfer: under 16
 /// constant actions (8 yaws x a_z = -0.05, -0.2: `ZS=-0.05,-0.2 examples/screw_sweep`) at most 6 episodes
-/// fail within 300 steps (measured 4, 2026-12-04; 3 of the 16 seated the nut within 2400 steps and 4 were
+/// fail within 300 steps (measured 4; 3 of the 16 seat the nut within 2400 steps and 4 are
 /// still screwing). Regression test for the flat-cut tip: its nut's bore edge sat on the crest and 12 of
 /// the 16 failed within 300 steps, the nut and hand sliding off the bolt's axis (1 seated). Single
 /// episodes from the tip are chaotic (a world's outcome changes with the batch it runs in), so the test
@@ -252,13 +252,12 @@ fn from_the_tip_the_chamfer_keeps_most_constant_actions_on_the_bolt() {
     assert!(failed <= 6, "{failed} of {worlds} episodes failed within 300 steps: {ended:?}");
 }
 
-/// Regression: a world's trajectory depended on how many worlds were stepped with it. The contact pipeline
-/// split each pair's query triangles into more jobs the fewer worlds there were (to fill the device), and
-/// the split changes which candidates share a reduction batch, so the patches kept: the same constant
-/// action (yaw -0.8) dropped the nut off the tip at step 706 in batches of 6 and 8 worlds and kept it on
-/// in a batch of 1 (2026-12-05; 1 and 8 worlds differed from the first step, 1 and 3 not at all). The env
-/// now fixes the split (`ContactConfig::chunk_world_count`), so evaluating with any `--envs` replays the
-/// physics the policy was trained on.
+/// A world's trajectory does not depend on how many worlds are stepped with it. Left to the world count,
+/// the contact pipeline splits each pair's query triangles into more jobs the fewer worlds there are (to
+/// fill the device), and the split changes which candidates share a reduction batch, so the patches kept:
+/// the same constant action (yaw -0.8) then drops the nut off the tip at step 706 in batches of 6 and 8
+/// worlds and keeps it on in a batch of 1. The env fixes the split (`ContactConfig::chunk_world_count`),
+/// so evaluating with any `--envs` replays the physics the policy was trained on.
 #[test]
 fn a_worlds_trajectory_does_not_depend_on_the_batch_size() {
     let world0 = |worlds: usize| {
@@ -283,13 +282,13 @@ fn a_worlds_trajectory_does_not_depend_on_the_batch_size() {
 /// `solve = "device"` (the coupled solve on the GPU kernel, lavapipe here) steps the env as the host
 /// reference does: two worlds turning the nut clockwise (a = -0.6) from the first thread for 1 s, with the
 /// pads' forces observed (read back for every world at once). The nut's position agrees within 0.25 mm
-/// (measured 0.13 mm, 2026-12-05: float order over 60 steps of contact; engine/tests/articulation_contact.rs
+/// (measured 0.13 mm: float order over 60 steps of contact; engine/tests/articulation_contact.rs
 /// bounds the kernel's parity frame by frame), where a nut slipping in the hand or a thread skipped would be
 /// a pitch (2 mm) off, and the pads' squeeze within 25% (measured 0.5%); the device's state is not saved
 /// (its warm start stays on the device).
 #[test]
 fn the_device_solve_steps_the_screw_env_as_the_host_does() {
-    use factory_engine::articulation::sim::CoupledSolve;
+    use factory_engine::sim::CoupledSolve;
     let run = |solve| {
         let cfg = FrankaNutBoltConfig { observe_finger_force: true, solve, ..engaged() };
         let (mut e, mut b) = env(2, cfg);

@@ -1,9 +1,9 @@
 //! The Screw env's step on the device (franka::screw_step: actions, controller, contacts, solve, reward,
 //! resets and observations without a readback) against the host env stepping the same device solve.
 
-use factory_engine::articulation::sim::CoupledSolve;
 use factory_engine::gpu::GpuContext;
 use factory_engine::rng::SplitMix64;
+use factory_engine::sim::CoupledSolve;
 use factory_envs::franka::screw_step::ScrewStepGpu;
 use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
 
@@ -13,10 +13,10 @@ use factory_envs::{Env, FrankaNutBolt, FrankaNutBoltConfig, StepBuffers};
 /// controller and the fingertip's kinematics run (device kernels vs host code: float rounding) and in
 /// nothing else: both step the same contact pipeline and coupled solve on the device.
 ///
-/// The first step of each episode is compared tightly (measured 2026-12-05: poses within 5.8e-7, velocities
+/// The first step of each episode is compared tightly (measured: poses within 5.8e-7, velocities
 /// 2.7e-4). Later steps drift apart as the nut on the bolt's tip amplifies rounding: the host env alone,
 /// its actions perturbed by 1e-5, drifts as far (nut poses 1e-3 after 3 steps, its spin 0.1-0.45 rad/s;
-/// measured the same day), so later steps are held only to the same flags and to the bounds below. The
+/// measured), so later steps are held only to the same flags and to the bounds below. The
 /// observation after each time limit (the next episode's first) must be the host's: the masked reset
 /// puts back the start state, at rest, with a cold warm start (a reset that left the nut's velocity fails
 /// this; one that kept last frame's warm-start rows does not: after a reset no old row matched here).

@@ -2,13 +2,14 @@
 //! [-1, 1], to the controller kernel's targets relative to the fingertip pose the articulation kernel
 //! computed ([`ArticulationGpu::world_dynamics`]), written where [`TaskSpaceGpu`] reads them
 //! ([`TaskSpaceGpu::inputs`]). With the controller kernel it closes the policy-to-torque path on the device,
-//! a piece of the device-resident Franka env (DESIGN.md 5). [`action_targets`] is the CPU reference (a test
-//! below checks the two on seeded Franka states).
+//! a piece of the device-resident Franka env (docs/ARCHITECTURE.md section 7). [`action_targets`] is the CPU
+//! reference (a test below checks the two on seeded Franka states).
 //!
 //! Layout: group 0 an [`ActionParamsGpu`] uniform (scales, the yaw mapping, the fingers' targets), group 1
 //! the articulation record and the actions (f32, shape [world_count * 12]), group 2 the controller's inputs.
 //! One invocation per world, 64 per workgroup; a few dozen flops each. The measured wrench in the inputs is
-//! written zero: a closed-loop force controller on the device needs the pads' forces there (not yet).
+//! written zero: a closed-loop force controller on the device would need the pads' forces there, which
+//! this kernel does not write.
 //!
 //! [`action_targets`]: super::nut_bolt::action_targets
 

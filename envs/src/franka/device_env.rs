@@ -1,6 +1,6 @@
-//! [`FrankaNutBolt`] as a [`DeviceEnv`] (cargo feature `wgpu`): the Screw step of [`ScrewStepGpu`] reading the
-//! policy's action tensor and writing the observation, reward and flag tensors on the learner's device, with
-//! no readback per step (issue 22, DESIGN.md 5).
+//! [`FrankaNutBolt`] as a [`DeviceEnv`] (cargo feature `wgpu`, which implies `device`): the Screw step of
+//! [`ScrewStepGpu`] reading the policy's action tensor and writing the observation, reward and flag tensors on
+//! the learner's device, with no readback per step.
 //!
 //! The learner must run on burn's wgpu runtime registered on the engine's own device and queue
 //! (factory-rl's `engine_wgpu_device`): tensors and the engine's buffers are then buffers of one

@@ -7,21 +7,28 @@
 //! the origin, its thread the exact analytic field (nut triangles queried against it); the table a
 //! half-space. Pads and table see the nut through its convex hull (a hexagonal prism: the flats the fingers
 //! grip are exact). The nut's frame is the assembly's: its pose is the identity when it is seated.
+//!
+//! Contact materials ([`ContactMaterials`], `[env.materials]`): each surface (nut, bolt, finger pads, table)
+//! has a Coulomb friction coefficient, and every contact pair takes the two surfaces' coefficients through
+//! one [`CombineRule`] (PhysX's combine modes; the default, "average", is PhysX's default and Factory's).
+//! The defaults are Factory's values (FactoryEnvNutBolt: nut and bolt 0.3; FactoryBase: Franka 1.0, table
+//! 0.3), which give the pairs: nut-table 0.3, nut-pad 0.65, pad-table 0.65, nut-bolt thread 0.3.
 
 use std::sync::Arc;
 
 use factory_assets::{nut_bolt, Fit, IsoSize, NutBolt, ThreadOptions};
 use factory_controllers::ArmBatch;
-use factory_engine::articulation::sim::ArticulatedSim;
 use factory_engine::articulation::{ArticulationModel, ArticulationState, Frame};
-use factory_engine::builder::ModelBuilder;
+use factory_engine::builder::{BodyHandle, Model, ModelBuilder, ShapeHandle};
 use factory_engine::contact::roles::ShapeGeometry;
 use factory_engine::contact::{ContactConfig, PairSpec, QueryShape, SdfShape, TransformGpu, NO_BODY};
 use factory_engine::gpu::GpuContext;
 use factory_engine::sdf::cache::SdfCache;
+use factory_engine::sim::ArticulatedSim;
 use factory_engine::solver::{BodyState, SolverConfig};
 use factory_engine::urdf::{parse_urdf, UrdfModel};
 use glam::{Quat, Vec3};
+use serde::{Deserialize, Serialize};
 
 use crate::error::{EnvError, Result};
 
@@ -49,6 +56,100 @@ pub const ARM_DOF: usize = 7;
 /// All joints.
 pub const DOF: usize = 9;
 
+/// How a contact pair's friction follows from its two surfaces' coefficients: PhysX's combine modes, which
+/// Isaac Gym and Isaac Lab expose (`friction_combine_mode`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CombineRule {
+    /// `(a + b) / 2`: PhysX's default, which Factory's scenes use.
+    #[default]
+    Average,
+    /// The smaller coefficient.
+    Min,
+    /// The product `a * b`.
+    Multiply,
+    /// The larger coefficient.
+    Max,
+}
+
+impl CombineRule {
+    /// The pair's coefficient for two surfaces of coefficients `a` and `b`.
+    pub fn combine(self, a: f32, b: f32) -> f32 {
+        match self {
+            // `ModelBuilder::build`'s expression: the pairs it makes keep their coefficient bit for bit.
+            CombineRule::Average => 0.5 * (a + b),
+            CombineRule::Min => a.min(b),
+            CombineRule::Multiply => a * b,
+            CombineRule::Max => a.max(b),
+        }
+    }
+}
+
+/// A surface of the scene with a contact material.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Surface {
+    /// The nut: its flats and faces (against the pads and the table) and its thread (against the bolt).
+    Nut,
+    /// The bolt's thread.
+    Bolt,
+    /// The two finger pads.
+    FingerPads,
+    /// The table top.
+    Table,
+}
+
+/// `[env.materials]`: each surface's Coulomb friction coefficient (unitless) and the rule that combines a
+/// pair's two. The defaults are Factory's (FactoryEnvNutBolt's `nut_bolt_friction`, FactoryBase's
+/// `franka_friction` and `table_friction`) with PhysX's average.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ContactMaterials {
+    /// Friction of the nut's steel (Factory's `nut_bolt_friction`: 0.3).
+    pub nut: f32,
+    /// Friction of the bolt's steel (Factory's `nut_bolt_friction`: 0.3).
+    pub bolt: f32,
+    /// Friction of the finger pads (Factory's `franka_friction`: 1.0).
+    pub finger_pads: f32,
+    /// Friction of the table top (Factory's `table_friction`: 0.3).
+    pub table: f32,
+    /// How a pair combines its two surfaces' coefficients: "average" (PhysX's default and Factory's), "min",
+    /// "multiply" or "max".
+    pub combine: CombineRule,
+}
+
+impl Default for ContactMaterials {
+    fn default() -> Self {
+        Self { nut: 0.3, bolt: 0.3, finger_pads: 1.0, table: 0.3, combine: CombineRule::Average }
+    }
+}
+
+impl ContactMaterials {
+    /// Surface `s`'s coefficient.
+    pub fn friction(&self, s: Surface) -> f32 {
+        match s {
+            Surface::Nut => self.nut,
+            Surface::Bolt => self.bolt,
+            Surface::FingerPads => self.finger_pads,
+            Surface::Table => self.table,
+        }
+    }
+
+    /// The coefficient of a contact pair between surfaces `a` and `b`.
+    pub fn pair_friction(&self, a: Surface, b: Surface) -> f32 {
+        self.combine.combine(self.friction(a), self.friction(b))
+    }
+
+    /// Each surface's key under `[env.materials]` and its coefficient (for checks that name the key).
+    pub fn coefficients(&self) -> [(&'static str, f32); 4] {
+        [
+            ("materials.nut", self.nut),
+            ("materials.bolt", self.bolt),
+            ("materials.finger_pads", self.finger_pads),
+            ("materials.table", self.table),
+        ]
+    }
+}
+
 /// How the scene is built.
 #[derive(Clone, Debug)]
 pub struct SceneConfig {
@@ -60,8 +161,10 @@ pub struct SceneConfig {
     pub contact: ContactConfig,
     /// Thread columns per turn of the generated nut (its triangles are queried against the bolt).
     pub segments_per_turn: usize,
-    /// Friction of the nut-bolt pair (Factory's nut and bolt: 0.3).
-    pub thread_mu: f32,
+    /// Friction of every surface and how a pair combines them.
+    pub materials: ContactMaterials,
+    /// The thread pair's friction in place of the materials' nut-bolt combination (`None`: combined).
+    pub thread_mu: Option<f32>,
     /// The robot's base position [m] ([`BASE`] is Factory's).
     pub base: Vec3,
     /// Damping of each arm joint [N m s/rad] (IsaacGymEnvs' Factory Franka URDF: 10 on joints 1-6, none on
@@ -86,11 +189,98 @@ pub struct NutBoltScene {
     pub nut: usize,
     /// The thread pair's index among the contact pairs (for its contact force).
     pub thread_pair: usize,
+    /// The two surfaces of each contact pair, in the contact model's pair order (the materials they take).
+    pub pair_surfaces: Vec<(Surface, Surface)>,
 }
 
 fn steel_nut(size: IsoSize, segments_per_turn: usize, bolt_tip_chamfer: bool) -> Result<NutBolt> {
     nut_bolt(size, Fit::Loose, &ThreadOptions { segments_per_turn, bolt_tip_chamfer, ..Default::default() })
         .map_err(|e| EnvError::Build(format!("M16 nut and bolt: {e}")))
+}
+
+/// Contact offset of the pads', nut's and table's pairs [m] (candidates farther apart are ignored).
+const CONTACT_OFFSET: f32 = 0.005;
+/// Contact offset of the thread pair [m].
+const THREAD_CONTACT_OFFSET: f32 = 0.002;
+
+/// The scene's bodies and contact pairs, before the simulator takes them.
+struct SceneModel {
+    model: Model,
+    nb: NutBolt,
+    /// The nut's body.
+    nut: BodyHandle,
+    /// The thread pair's index among the contact pairs.
+    thread_pair: usize,
+    /// The two surfaces of each contact pair, in `model.contacts.pairs` order.
+    pair_surfaces: Vec<(Surface, Surface)>,
+}
+
+/// One world's nut, table and finger pads (on `art`'s links) replicated `cfg.worlds` times, and the thread
+/// pair; each pair's friction is `cfg.materials`' combination of its two surfaces' (the thread's is
+/// `cfg.thread_mu` where that is set).
+fn scene_model(cfg: &SceneConfig, urdf: &UrdfModel, art: &ArticulationModel) -> Result<SceneModel> {
+    let materials = &cfg.materials;
+    let nb = steel_nut(IsoSize::M16, cfg.segments_per_turn, cfg.bolt_tip_chamfer)?;
+    let mut b = ModelBuilder::new(art.gravity);
+    let mut surfaces = Vec::new();
+    let nut = b.add_dynamic_body(&nb.nut.mass_properties);
+    let nut_shape = b.add_shape(
+        Some(nut),
+        (Vec3::ZERO, Quat::IDENTITY),
+        ShapeGeometry::Mesh { mesh: Arc::new(nb.nut.mesh.clone()), sdf_resolution: None },
+    );
+    surfaces.push((nut_shape, Surface::Nut));
+    let table = b.add_shape(None, (Vec3::ZERO, Quat::IDENTITY), ShapeGeometry::Plane);
+    surfaces.push((table, Surface::Table));
+    for s in [nut_shape, table] {
+        b.shape_mut(s).contact_offset = CONTACT_OFFSET;
+    }
+    let pads = materials.finger_pads;
+    let (_, left) = b.add_urdf_link(urdf, art, "panda_leftfinger", pads, CONTACT_OFFSET)?;
+    let (_, right) = b.add_urdf_link(urdf, art, "panda_rightfinger", pads, CONTACT_OFFSET)?;
+    surfaces.extend(left.iter().chain(&right).map(|&s| (s, Surface::FingerPads)));
+    b.filter_pair(left[0], right[0]);
+    // The pads are wider than the nut's flats (17.5 vs 13.9 mm): queried at a 4 x 4 grid per face, as
+    // Factory subdivides its finger mesh, they hold the flat at several points, not at a face triangle's one
+    // deepest point (which let the nut turn in the hand).
+    for pad in [left[0], right[0]] {
+        if let ShapeGeometry::Box { half_extents } = b.shape_mut(pad).geometry {
+            b.shape_mut(pad).geometry = ShapeGeometry::GridBox { half_extents, points_per_edge: 4 };
+        }
+    }
+    for &(s, surface) in &surfaces {
+        b.shape_mut(s).friction = materials.friction(surface);
+    }
+    b.replicate(cfg.worlds);
+    let mut model = b.build(&SdfCache::new(SdfCache::default_dir()))?;
+    // Every pair's friction by the materials' rule (the builder's own is the average).
+    let surface = |s: ShapeHandle| {
+        surfaces
+            .iter()
+            .find(|(h, _)| *h == s)
+            .map(|&(_, surface)| surface)
+            .ok_or_else(|| EnvError::Build(format!("shape {} has no contact material", s.0)))
+    };
+    let mut pair_surfaces = Vec::with_capacity(model.pair_shapes.len() + 1);
+    for (pair, &(a, b)) in model.contacts.pairs.iter_mut().zip(&model.pair_shapes) {
+        let (a, b) = (surface(a)?, surface(b)?);
+        pair.friction = materials.pair_friction(a, b);
+        pair_surfaces.push((a, b));
+    }
+    // The thread: the nut's triangles against the bolt's exact field, the bolt fixed at the origin.
+    let thread_pair = model.contacts.pairs.len();
+    model.contacts.pairs.push(PairSpec {
+        body_a: nut.0,
+        a_pose: (Vec3::ZERO, Quat::IDENTITY),
+        query: Arc::new(QueryShape::mesh(&nb.nut.mesh)),
+        body_b: NO_BODY,
+        b_pose: (Vec3::ZERO, Quat::IDENTITY),
+        sdf: SdfShape::Thread(nb.bolt_sdf()),
+        contact_offset: THREAD_CONTACT_OFFSET,
+        friction: cfg.thread_mu.unwrap_or_else(|| materials.pair_friction(Surface::Nut, Surface::Bolt)),
+    });
+    pair_surfaces.push((Surface::Nut, Surface::Bolt));
+    Ok(SceneModel { model, nb, nut, thread_pair, pair_surfaces })
 }
 
 impl NutBoltScene {
@@ -119,43 +309,7 @@ impl NutBoltScene {
         let tip = art
             .frame("panda_fingertip_centered")
             .ok_or_else(|| EnvError::Build(format!("{FRANKA_URDF} has no panda_fingertip_centered frame")))?;
-        let nb = steel_nut(IsoSize::M16, cfg.segments_per_turn, cfg.bolt_tip_chamfer)?;
-        let mut b = ModelBuilder::new(art.gravity);
-        // Factory: nut friction 0.3, Franka 1.0, table 0.3 (pairs take the mean).
-        let nut = b.add_dynamic_body(&nb.nut.mass_properties);
-        let nut_shape = b.add_shape(
-            Some(nut),
-            (Vec3::ZERO, Quat::IDENTITY),
-            ShapeGeometry::Mesh { mesh: Arc::new(nb.nut.mesh.clone()), sdf_resolution: None },
-        );
-        b.shape_mut(nut_shape).friction = 0.3;
-        let table = b.add_shape(None, (Vec3::ZERO, Quat::IDENTITY), ShapeGeometry::Plane);
-        b.shape_mut(table).friction = 0.3;
-        let (_, left) = b.add_urdf_link(&urdf, &art, "panda_leftfinger", 1.0, 0.005)?;
-        let (_, right) = b.add_urdf_link(&urdf, &art, "panda_rightfinger", 1.0, 0.005)?;
-        b.filter_pair(left[0], right[0]);
-        // The pads are wider than the nut's flats (17.5 vs 13.9 mm): queried at a 4 x 4 grid per face, as
-        // Factory subdivides its finger mesh, they hold the flat at several points, not at a face
-        // triangle's one deepest point (which let the nut turn in the hand).
-        for pad in [left[0], right[0]] {
-            if let ShapeGeometry::Box { half_extents } = b.shape_mut(pad).geometry {
-                b.shape_mut(pad).geometry = ShapeGeometry::GridBox { half_extents, points_per_edge: 4 };
-            }
-        }
-        b.replicate(cfg.worlds);
-        let mut model = b.build(&SdfCache::new(SdfCache::default_dir()))?;
-        // The thread: the nut's triangles against the bolt's exact field, the bolt fixed at the origin.
-        let thread_pair = model.contacts.pairs.len();
-        model.contacts.pairs.push(PairSpec {
-            body_a: nut.0,
-            a_pose: (Vec3::ZERO, Quat::IDENTITY),
-            query: Arc::new(QueryShape::mesh(&nb.nut.mesh)),
-            body_b: NO_BODY,
-            b_pose: (Vec3::ZERO, Quat::IDENTITY),
-            sdf: SdfShape::Thread(nb.bolt_sdf()),
-            contact_offset: 0.002,
-            friction: cfg.thread_mu,
-        });
+        let SceneModel { model, nb, nut, thread_pair, pair_surfaces } = scene_model(cfg, &urdf, &art)?;
         let body_count = model.bodies.body_count();
         let worlds = cfg.worlds as usize;
         let mut body_q = vec![TransformGpu::new(Vec3::ZERO, Quat::IDENTITY); worlds * body_count];
@@ -165,7 +319,7 @@ impl NutBoltScene {
         }
         let state = BodyState { body_q, body_qd: vec![[Vec3::ZERO; 2]; worlds * body_count] };
         let sim = ArticulatedSim::new(gpu, model, art, cfg.solver.clone(), &cfg.contact, state, joints)?;
-        Ok(Self { sim, nb, tip, nut: nut.0 as usize, thread_pair })
+        Ok(Self { sim, nb, tip, nut: nut.0 as usize, thread_pair, pair_surfaces })
     }
 
     /// Worlds.
@@ -198,5 +352,100 @@ impl NutBoltScene {
     /// The controllers' view of the arm in every world (fingertip pose, twist, Jacobian, M, g).
     pub fn arm(&self) -> ArmBatch {
         ArmBatch::from_articulation(&self.sim.articulation, &self.sim.joints, &self.tip, ARM_DOF, &[])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The Screw env's scene, one world.
+    fn screw_scene() -> SceneConfig {
+        SceneConfig {
+            worlds: 1,
+            solver: SolverConfig::default(),
+            contact: ContactConfig::default(),
+            segments_per_turn: 48,
+            materials: ContactMaterials::default(),
+            thread_mu: None,
+            base: BASE,
+            arm_damping: [10.0; ARM_DOF],
+            finger_drive: [500.0, 20.0],
+            bolt_tip_chamfer: true,
+        }
+    }
+
+    /// Factory's coefficients of each pair, as the scene set them before it had materials: the builder's
+    /// `0.5 * (a + b)` of the shapes' literals (nut 0.3, pads 1.0, table 0.3) and the thread's 0.3.
+    fn factorys(a: Surface, b: Surface) -> f32 {
+        use Surface::*;
+        match (a, b) {
+            (Nut, Table) | (Table, Nut) => 0.3,
+            (Nut, FingerPads) | (FingerPads, Nut) | (FingerPads, Table) | (Table, FingerPads) => 0.65,
+            (Nut, Bolt) | (Bolt, Nut) => 0.3,
+            _ => panic!("no {a:?}-{b:?} pair in the scene"),
+        }
+    }
+
+    #[test]
+    fn the_default_materials_give_factorys_pair_frictions_bit_for_bit() {
+        use Surface::*;
+        let m = ContactMaterials::default();
+        for (a, b) in [(Nut, Table), (Nut, FingerPads), (FingerPads, Table), (Nut, Bolt)] {
+            assert_eq!(m.pair_friction(a, b).to_bits(), factorys(a, b).to_bits(), "{a:?}-{b:?}");
+            assert_eq!(m.pair_friction(b, a).to_bits(), factorys(a, b).to_bits(), "{b:?}-{a:?}");
+        }
+        // The literal 0.65 is what the builder's mean of the old literals gave.
+        assert_eq!((0.5 * (0.3f32 + 1.0f32)).to_bits(), 0.65f32.to_bits());
+        assert_eq!((0.5 * (0.3f32 + 0.3f32)).to_bits(), 0.3f32.to_bits());
+    }
+
+    #[test]
+    fn each_rule_combines_as_named() {
+        let (a, b) = (0.3, 1.0);
+        assert_eq!(CombineRule::Average.combine(a, b), 0.5 * (a + b));
+        assert_eq!(CombineRule::Min.combine(a, b), 0.3);
+        assert_eq!(CombineRule::Multiply.combine(a, b), 0.3);
+        assert_eq!(CombineRule::Max.combine(a, b), 1.0);
+        assert_eq!(CombineRule::default(), CombineRule::Average);
+    }
+
+    /// Every contact pair of the built scene (nut-table, two nut-pad, two pad-table, the thread) takes the
+    /// coefficient the scene had before it had materials; `thread_mu` replaces the thread's alone, and
+    /// another rule reaches every combined pair.
+    #[test]
+    fn the_scene_pairs_take_their_materials() {
+        let urdf = franka_urdf().unwrap();
+        let art = ArticulationModel::from_urdf(&urdf, (BASE, Quat::IDENTITY), Vec3::new(0.0, 0.0, -9.81)).unwrap();
+        let s = scene_model(&screw_scene(), &urdf, &art).unwrap();
+        let pairs = &s.model.contacts.pairs;
+        assert_eq!(s.pair_surfaces.len(), pairs.len());
+        assert_eq!(s.pair_surfaces[s.thread_pair], (Surface::Nut, Surface::Bolt));
+        let count = |x: Surface, y: Surface| s.pair_surfaces.iter().filter(|&&p| p == (x, y) || p == (y, x)).count();
+        use Surface::*;
+        assert_eq!(
+            [count(Nut, Table), count(Nut, FingerPads), count(FingerPads, Table), count(Nut, Bolt), pairs.len()],
+            [1, 2, 2, 1, 6],
+            "{:?}",
+            s.pair_surfaces
+        );
+        for (pair, &(a, b)) in pairs.iter().zip(&s.pair_surfaces) {
+            assert_eq!(pair.friction.to_bits(), factorys(a, b).to_bits(), "{a:?}-{b:?}: {}", pair.friction);
+        }
+
+        let cfg = SceneConfig {
+            thread_mu: Some(0.2),
+            materials: ContactMaterials { combine: CombineRule::Max, ..Default::default() },
+            ..screw_scene()
+        };
+        let s = scene_model(&cfg, &urdf, &art).unwrap();
+        for (i, (pair, &(a, b))) in s.model.contacts.pairs.iter().zip(&s.pair_surfaces).enumerate() {
+            let expected = match (a, b) {
+                _ if i == s.thread_pair => 0.2,
+                (FingerPads, _) | (_, FingerPads) => 1.0,
+                _ => 0.3,
+            };
+            assert_eq!(pair.friction, expected, "{a:?}-{b:?}");
+        }
     }
 }

@@ -4,7 +4,7 @@
 //! [`FrankaNutBolt`] is the reference (envs/tests/franka_screw_device.rs steps both from the same start
 //! with the same actions).
 //!
-//! One step, recorded into one command buffer (DESIGN.md 5, "rollouts stay on the GPU"):
+//! One step, recorded into one command buffer (docs/ARCHITECTURE.md section 7: rollouts stay on the device):
 //! 1. [`ActionGpu`]: actions to the controller's targets, relative to the fingertip in the articulation
 //!    kernel's record ([`ArticulationGpu::world_dynamics`], computed at the end of the step before);
 //! 2. [`TaskSpaceGpu`]: the controller's torques into the articulation kernel's `joint_tau`;
@@ -32,9 +32,9 @@
 use bytemuck::{Pod, Zeroable};
 use factory_controllers::TaskSpaceGpu;
 use factory_engine::articulation::gpu::ArticulationGpu;
-use factory_engine::articulation::sim::{ArticulatedSim, CoupledSolve};
 use factory_engine::articulation::ArticulationControl;
 use factory_engine::gpu::{dispatch_compute, Binding, ExplicitLayout, GpuContext};
+use factory_engine::sim::{ArticulatedSim, CoupledSolve};
 use factory_engine::solver::Control;
 use factory_engine::wgpu;
 
