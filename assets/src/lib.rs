@@ -22,6 +22,7 @@
 //! # Ok::<(), factory_assets::AssetError>(())
 //! ```
 
+pub mod cli;
 pub mod error;
 pub mod fastener;
 mod geom;

@@ -30,15 +30,15 @@ use anyhow::{ensure, Context, Result};
 use factory_assets::NutBolt;
 use factory_controllers::{build, ArmBatch, Controller, ControllerConfig, Targets, TaskSpaceGpu};
 use factory_engine::articulation::gpu::ArticulationGpu;
-use factory_engine::articulation::sim::ArticulatedSim;
 use factory_engine::articulation::{ArticulationControl, ArticulationModel, ArticulationState, Frame};
 use factory_engine::contact::ContactConfig;
 use factory_engine::gpu::GpuContext;
 use factory_engine::rng::SplitMix64;
+use factory_engine::sim::ArticulatedSim;
 use factory_engine::solver::{Control, SolverConfig};
 use factory_engine::wgpu;
 
-use factory_envs::franka::scene::{NutBoltScene, SceneConfig};
+use factory_envs::franka::scene::{ContactMaterials, NutBoltScene, SceneConfig};
 use glam::{Quat, Vec3};
 
 use std::time::Instant;
@@ -55,7 +55,7 @@ pub const TARGET_YAW_RATE: f32 = 2.0;
 /// Pads' bottom (the fingertip frame) above the nut's bottom while holding it [m].
 const GRASP_HEIGHT: f32 = 0.002;
 
-pub use factory_engine::articulation::sim::CoupledSolve;
+pub use factory_engine::sim::CoupledSolve;
 
 /// Settings of one run.
 #[derive(Clone, Debug)]
@@ -68,14 +68,17 @@ pub struct FrankaNutBoltRun {
     pub contact: ContactConfig,
     /// Thread columns per turn of the generated nut (its triangles are queried against the bolt).
     pub segments_per_turn: usize,
-    /// Friction of the nut-bolt pair (Factory's nut and bolt: 0.3).
-    pub thread_mu: f32,
+    /// Friction of the nut, bolt, finger pads and table, and the rule that combines a pair's two (default:
+    /// Factory's, as the Screw env).
+    pub materials: ContactMaterials,
+    /// The thread pair's friction in place of the materials' nut-bolt combination (`--mu`; default: unset).
+    pub thread_mu: Option<f32>,
     /// The fingers' drive: stiffness [N/m] and damping [N s/m] (default 2000 / 50: 24 N of squeeze a finger
     /// on the nut; the Screw env uses Factory's 500 / 20).
     pub finger_drive: [f32; 2],
-    /// Chamfer the bolt's tip (ISO 4753, as Factory's bolt; the default). On the flat-cut tip the nut landed
-    /// on the crest and the pads slipped on it or it jammed part-way down: 47 of 64 worlds seated against
-    /// 64 of 64 with the chamfer (seed 1, 2026-12-04, docs/BENCHMARKS.md).
+    /// Chamfer the bolt's tip (ISO 4753, as Factory's bolt; the default). On the flat-cut tip the nut lands
+    /// on the crest and the pads slip on it or it jams part-way down: 47 of 64 worlds seat against
+    /// 64 of 64 with the chamfer (seed 1, docs/BENCHMARKS.md).
     pub bolt_tip_chamfer: bool,
     /// Where the coupled solve runs (default: auto).
     pub solve: CoupledSolve,
@@ -104,7 +107,8 @@ impl Default for FrankaNutBoltRun {
             },
             contact: ContactConfig::default(),
             segments_per_turn: 48,
-            thread_mu: 0.3,
+            materials: ContactMaterials::default(),
+            thread_mu: None,
             finger_drive: [2000.0, 50.0],
             bolt_tip_chamfer: true,
             solve: CoupledSolve::Auto,
@@ -258,6 +262,7 @@ impl FrankaNutBolt {
             solver: run.solver.clone(),
             contact: run.contact.clone(),
             segments_per_turn: run.segments_per_turn,
+            materials: run.materials.clone(),
             thread_mu: run.thread_mu,
             // A little joint damping (the real arm's joint friction) keeps the null space of the six-axis
             // task still and damps the screw stage's free axes.

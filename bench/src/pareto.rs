@@ -1,4 +1,4 @@
-//! `factory-bench pareto --scene nut-bolt`: the speed-against-error report (DESIGN.md section 6).
+//! `factory-bench pareto --scene nut-bolt`: the speed-against-error report (docs/ARCHITECTURE.md section 10).
 //!
 //! Each point runs the M16 nut-bolt scene ([`crate::scene::run_nut_bolt`]: contacts + GPU solver per
 //! frame) frictionless (mu 0) for a fixed simulated time, and compares the nut's descent with the analytic

@@ -19,7 +19,7 @@
 //!   paper's 1024).
 //! - `serial`: every pair of bodies in a fixed list, the broad phase skipping the far ones, and the world
 //!   stepped by one invocation (`GpuSolver`); lavapipe's 65535 loop passes per invocation limit this to a
-//!   few dozen bodies per world (measured 2026-11-22: 32 toruses fit).
+//!   few dozen bodies per world (measured: 32 toruses fit).
 
 use crate::scene::SolverColumns;
 use anyhow::{ensure, Context, Result};
@@ -206,8 +206,8 @@ pub struct PileRun {
     pub seed: u64,
     pub pile_solver: PileSolver,
     /// Frames at the end of the run for which the fastest bodies of world 0 are printed on stderr, one
-    /// line per frame (index, speed, velocity, spin, centre of mass): what found a nut orbiting between two
-    /// poses for good (docs/BENCHMARKS.md, 2026-12-03). 0: none.
+    /// line per frame (index, speed, velocity, spin, centre of mass): what shows a nut orbiting between two
+    /// poses for good (docs/BENCHMARKS.md). 0: none.
     pub trace_frames: u32,
     /// Sleeping of bodies that stay put (coloured solver only; `factory_engine::crowd::SleepConfig`).
     pub sleep: SleepConfig,

@@ -1,6 +1,8 @@
 //! `factory-bench scene`: whole frames (contact handling + Gauss-Seidel solve, both on the GPU) of the
-//! paper's scenes (section III-D, Table II), with the scene's accuracy figures. Scenes so far: nut-bolt.
-//! (Peg-in-hole, piles of nuts, bowls and toruses are the next scenes.)
+//! paper's scenes (section III-D, Table II), with the scene's accuracy figures. This module holds the nut-bolt
+//! scene and the timing helpers the scenes share; the piles are [`crate::pile`], the Franka scene
+//! [`crate::franka`]. Peg-in-hole is not a benchmark scene (its dynamics are tested in
+//! bench/tests/peg_in_hole.rs).
 
 use crate::contact_scene::{lower_until_touch, ContactScene, PartPair};
 use anyhow::{ensure, Result};

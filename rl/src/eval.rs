@@ -37,6 +37,80 @@ pub struct EvalReport {
     pub identical_starts: bool,
 }
 
+impl EvalReport {
+    /// The report for a person: a title naming the env and how it acted, then one line per figure the env
+    /// defines. Outcomes are the env's own end causes (`success`, `time_limit`, its failure causes); the
+    /// joint-torque line appears only for an env that measures it.
+    pub fn summary(&self, env: &str, worlds: usize) -> String {
+        let actions = if self.stochastic { "sampled" } else { "mean" };
+        let mut rows: Vec<(&str, String)> = Vec::new();
+        let successes = self.ended_by.0.get("success").copied().unwrap_or(0);
+        rows.push(("success", format!("{:.1}% ({successes} of {})", 100.0 * self.success_rate, self.episodes)));
+        if self.mean_steps_to_success.is_finite() {
+            rows.push(("steps to success", format!("{:.1} mean", self.mean_steps_to_success)));
+        }
+        rows.push(("mean return", format!("{:.3}", self.mean_return)));
+        if self.mean_joint_torque_norm.is_finite() {
+            rows.push(("joint torque", format!("{:.2} N m mean norm", self.mean_joint_torque_norm)));
+        }
+        let ended: Vec<String> = self.ended_by.0.iter().map(|(cause, n)| format!("{cause} {n}")).collect();
+        rows.push(("ended by", ended.join(", ")));
+        let width = rows.iter().map(|(l, _)| l.len()).max().unwrap_or(0);
+        let mut s = format!("{env} ({actions} actions): {} episodes over {worlds} worlds\n", self.episodes);
+        for (label, value) in rows {
+            s.push_str(&format!("  {label:<width$}  {value}\n"));
+        }
+        s
+    }
+}
+
+/// How many of the episodes have ended, shown on stderr ([`EvalOptions::progress`]).
+enum Progress {
+    /// A bar on a terminal.
+    Bar(indicatif::ProgressBar),
+    /// A line each time another `every` episodes have ended, for logs.
+    Lines { episodes: usize, every: usize, shown: std::cell::Cell<usize> },
+}
+
+impl Progress {
+    fn new(episodes: usize) -> Self {
+        use std::io::IsTerminal;
+        if std::io::stderr().is_terminal() {
+            let bar = indicatif::ProgressBar::new(episodes as u64);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} episodes  {msg}")
+                    .expect("valid template")
+                    .progress_chars("=> "),
+            );
+            Progress::Bar(bar)
+        } else {
+            Progress::Lines { episodes, every: episodes.div_ceil(16).max(1), shown: Default::default() }
+        }
+    }
+
+    /// `done` episodes have ended, as `ended_by` counts them.
+    fn update(&self, done: usize, ended_by: &EndCauses) {
+        match self {
+            Progress::Bar(bar) => {
+                bar.set_position(done as u64);
+                bar.set_message(ended_by.summary());
+            }
+            Progress::Lines { episodes, every, shown } => {
+                if done / every > shown.get() / every {
+                    shown.set(done);
+                    eprintln!("eval: {done} of {episodes} episodes; ended: {}", ended_by.summary());
+                }
+            }
+        }
+    }
+
+    fn finish(self) {
+        if let Progress::Bar(bar) = self {
+            bar.finish_and_clear();
+        }
+    }
+}
+
 /// Named values of world 0 at every evaluation step: its contact-force norms (the data of the paper's Fig.
 /// S17) or its observation, action, reward and flags (what the policy saw and did).
 #[derive(Clone, Debug, Default)]
@@ -57,8 +131,9 @@ pub struct EvalOptions<'a> {
     /// Fills world 0's observation (the step's input), action (clipped to [-1, 1]), reward and
     /// terminated / truncated / success flags per step.
     pub steps: Option<&'a mut Trace>,
-    /// Print a line to stderr each time another sixteenth of the episodes has ended (episodes, seated, how
-    /// they ended so far): a long evaluation shows where it is, and an interrupted one leaves its counts.
+    /// Show the episodes that have ended and how (the env's end causes) on stderr: a progress bar on a
+    /// terminal, else a line each time another sixteenth has ended, so that a log shows where a long
+    /// evaluation is and an interrupted one leaves its counts.
     pub progress: bool,
 }
 
@@ -86,7 +161,7 @@ pub fn evaluate(
     opts: EvalOptions<'_>,
 ) -> EvalReport {
     let EvalOptions { noise_seed, mut forces, mut steps, progress } = opts;
-    let report_every = episodes.div_ceil(16).max(1);
+    let bar = progress.then(|| Progress::new(episodes));
     let spec = env.spec().clone();
     if let Some(t) = steps.as_deref_mut() {
         t.names = spec.observation_names.clone();
@@ -133,7 +208,6 @@ pub fn evaluate(
                 trace.rows.push(d.contact_force_norms.iter().map(|(_, v)| v[0]).collect());
             }
         }
-        let done_before = done;
         for w in 0..n {
             ret[w] += buf.reward[w] as f64;
             len[w] += 1;
@@ -152,9 +226,12 @@ pub fn evaluate(
                 len[w] = 0;
             }
         }
-        if progress && done / report_every > done_before / report_every {
-            eprintln!("eval: {done} of {episodes} episodes, {succ} seated; ended: {}", ended_by.summary());
+        if let Some(b) = &bar {
+            b.update(done, &ended_by);
         }
+    }
+    if let Some(b) = bar {
+        b.finish();
     }
     EvalReport {
         episodes: done,
@@ -165,5 +242,44 @@ pub fn evaluate(
         mean_joint_torque_norm: if torque_count > 0 { torque_sum / torque_count as f64 } else { f64::NAN },
         ended_by,
         identical_starts,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn report(torque: f64) -> EvalReport {
+        let mut ended_by = EndCauses::default();
+        ended_by.add("success", 3);
+        ended_by.add("time_limit", 1);
+        EvalReport {
+            episodes: 4,
+            success_rate: 0.75,
+            mean_steps_to_success: 12.0,
+            mean_return: 1.5,
+            mean_joint_torque_norm: torque,
+            ended_by,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn summary_names_only_what_the_env_defines() {
+        let s = report(f64::NAN).summary("point_mass", 2);
+        assert_eq!(
+            s,
+            "point_mass (mean actions): 4 episodes over 2 worlds\n  success           75.0% (3 of 4)\n  steps to \
+             success  12.0 mean\n  mean return       1.500\n  ended by          success 3, time_limit 1\n"
+        );
+        assert!(!s.contains("torque") && !s.contains("NaN"), "{s}");
+        let s = report(4.25).summary("franka_nut_bolt", 2);
+        assert!(s.contains("joint torque      4.25 N m mean norm"), "{s}");
+    }
+
+    #[test]
+    fn summary_leaves_out_steps_to_success_when_none_succeeded() {
+        let r = EvalReport { success_rate: 0.0, mean_steps_to_success: f64::NAN, ..report(f64::NAN) };
+        assert!(!r.summary("point_mass", 1).contains("steps to success"));
     }
 }

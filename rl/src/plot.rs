@@ -68,8 +68,8 @@ fn plot_err<E: std::fmt::Display>(e: E) -> RlError {
     RlError::BadFile { path: "plot".into(), reason: e.to_string() }
 }
 
-/// Three panels: success rate against env steps and against training wall time (the issue asks for both),
-/// and the mean episode return against env steps.
+/// Three panels: success rate against env steps and against training wall time (sample
+/// efficiency and wall-clock cost), and the mean episode return against env steps.
 pub fn plot_svg(points: &[CurvePoint], title: &str) -> Result<String> {
     use plotters::prelude::*;
     let mut svg = String::new();

@@ -526,3 +526,326 @@ impl Ppo {
         p
     }
 }
+
+/// The PPO maths on rollouts of a few steps, against values worked out by hand (the arithmetic is in the
+/// comments): GAE with its episode ends and truncation bootstrap, the clipped surrogate, the clipped value
+/// loss, the bounds loss, advantage normalisation and the return statistics of value normalisation. The
+/// networks have no hidden layer and hand-set weights, so the action means and values are known; the losses
+/// are the ones [`Ppo::update`] reports: with one epoch of one minibatch, those of the network before its
+/// step.
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// f32 arithmetic on a handful of values: the hand results hold to a few ulps.
+    const TOL: f32 = 1e-5;
+
+    fn assert_close(what: &str, actual: &[f32], expected: &[f32]) {
+        assert_eq!(actual.len(), expected.len(), "{what}: {actual:?} against {expected:?}");
+        for (a, e) in actual.iter().zip(expected) {
+            assert!((a - e).abs() <= TOL * e.abs().max(1.0), "{what}: {actual:?}, expected {expected:?}");
+        }
+    }
+
+    /// A learner on burn-flex with observations and actions of `action_dim` entries per world and no hidden
+    /// layer, after `tweak` sets its config.
+    fn learner(env_count: usize, action_dim: usize, tweak: impl FnOnce(&mut PpoConfig)) -> Ppo {
+        let mut cfg = PpoConfig { hidden: Vec::new(), max_grad_norm: 0.0, ..PpoConfig::default() };
+        tweak(&mut cfg);
+        Ppo::new(&cfg, env_count, 1, action_dim, 7, Device::flex())
+    }
+
+    /// Sets the network to `mu = obs * mu_w + mu_b` (mu_w [action_dim], one observation entry),
+    /// `v = obs * v_w + v_b` and the log standard deviations.
+    fn set_network(ppo: &mut Ppo, mu_w: &[f32], mu_b: &[f32], v: [f32; 2], log_std: &[f32]) {
+        let mut params = ppo.model.export();
+        let values: [&[f32]; 5] = [mu_w, mu_b, &v[..1], &v[1..], log_std];
+        for (p, new) in params.iter_mut().zip(values) {
+            assert_eq!(p.2.len(), new.len(), "parameter shape {:?}", p.1);
+            p.2 = new.to_vec();
+        }
+        ppo.model = ppo.model.clone().import(&params, &ppo.train_device).unwrap();
+    }
+
+    /// A rollout's data, time-major ([t][world] flattened), for [`Rollout`].
+    struct Data {
+        t: usize,
+        n: usize,
+        obs: Vec<f32>,
+        action: Vec<f32>,
+        logp: Vec<f32>,
+        value: Vec<f32>,
+        reward: Vec<f32>,
+        terminated: Vec<f32>,
+        truncated: Vec<f32>,
+        last_value: Vec<f32>,
+    }
+
+    impl Data {
+        /// Zeros for `t` steps of `n` worlds with one observation and `action_dim` action entries.
+        fn zeros(t: usize, n: usize, action_dim: usize) -> Self {
+            let z = |k: usize| vec![0.0; k];
+            Self {
+                t,
+                n,
+                obs: z(t * n),
+                action: z(t * n * action_dim),
+                logp: z(t * n),
+                value: z(t * n),
+                reward: z(t * n),
+                terminated: z(t * n),
+                truncated: z(t * n),
+                last_value: z(n),
+            }
+        }
+
+        fn rollout(&self, device: &Device) -> Rollout {
+            let (t, n) = (self.t, self.n);
+            let grid = |v: &[f32]| Tensor::<1>::from_floats(v, device).reshape([t, n]);
+            let a = self.action.len() / (t * n);
+            Rollout {
+                obs: Tensor::<1>::from_floats(self.obs.as_slice(), device).reshape([t, n, 1]),
+                action: Tensor::<1>::from_floats(self.action.as_slice(), device).reshape([t, n, a]),
+                logp: grid(&self.logp),
+                value: grid(&self.value),
+                reward: grid(&self.reward),
+                terminated: grid(&self.terminated),
+                truncated: grid(&self.truncated),
+                last_value: Tensor::from_floats(self.last_value.as_slice(), device),
+            }
+        }
+    }
+
+    /// gamma 0.5 and lambda 0.75 (gamma lambda = 0.375): exact in binary, and apart, so a swap shows.
+    fn gae_learner(n: usize, value_bootstrap: bool) -> Ppo {
+        learner(n, 1, |c| {
+            c.gamma = 0.5;
+            c.gae_lambda = 0.75;
+            c.value_bootstrap = value_bootstrap;
+        })
+    }
+
+    /// One world, three steps: r = [1, 2, 3], V = [0.5, 1, 1.5], the given end flags on the middle step, and
+    /// V = 2 after the last.
+    fn three_steps(terminated: f32, truncated: f32) -> Data {
+        Data {
+            reward: vec![1.0, 2.0, 3.0],
+            value: vec![0.5, 1.0, 1.5],
+            terminated: vec![0.0, terminated, 0.0],
+            truncated: vec![0.0, truncated, 0.0],
+            last_value: vec![2.0],
+            ..Data::zeros(3, 1, 1)
+        }
+    }
+
+    /// No episode ends: the last step bootstraps from the value of the observation after the rollout.
+    #[test]
+    fn gae_runs_through_the_rollout_and_bootstraps_from_the_last_value() {
+        let ppo = gae_learner(1, true);
+        let adv = to_vec(ppo.gae(&three_steps(0.0, 0.0).rollout(&ppo.device)));
+        // delta_t = r_t + gamma V_{t+1} - V_t, A_t = delta_t + gamma lambda A_{t+1}:
+        // t=2: 3 + 0.5 * 2 (last_value) - 1.5 = 2.5;   A = 2.5
+        // t=1: 2 + 0.5 * 1.5 - 1 = 1.75;               A = 1.75 + 0.375 * 2.5 = 2.6875
+        // t=0: 1 + 0.5 * 1 - 0.5 = 1;                  A = 1 + 0.375 * 2.6875 = 2.0078125
+        assert_close("advantages", &adv, &[2.007_812_5, 2.6875, 2.5]);
+    }
+
+    /// A terminated step in the middle: no bootstrap across it, and no advantage carried back over it.
+    #[test]
+    fn gae_stops_at_a_terminated_step() {
+        let ppo = gae_learner(1, true);
+        let adv = to_vec(ppo.gae(&three_steps(1.0, 0.0).rollout(&ppo.device)));
+        // t=2 (the next episode's first step): 3 + 0.5 * 2 - 1.5 = 2.5
+        // t=1 (terminated): 2 + 0 - 1 = 1;            A = 1 (nothing from t=2)
+        // t=0: 1 + 0.5 * 1 - 0.5 = 1;                 A = 1 + 0.375 * 1 = 1.375
+        assert_close("advantages", &adv, &[1.375, 1.0, 2.5]);
+    }
+
+    /// A truncated step in the middle with `value_bootstrap`: the env has already reset the world, so the
+    /// episode's last observation is gone; as in rl_games the step's reward gets gamma V(s_t), the value of
+    /// the state the step was taken in, and nothing crosses into the next episode.
+    #[test]
+    fn gae_bootstraps_a_truncated_step_from_its_own_value() {
+        let ppo = gae_learner(1, true);
+        let adv = to_vec(ppo.gae(&three_steps(0.0, 1.0).rollout(&ppo.device)));
+        // t=2: 2.5 as above
+        // t=1 (truncated): r = 2 + 0.5 * V_1 = 2 + 0.5 * 1 = 2.5; delta = 2.5 - 1 = 1.5;   A = 1.5
+        // t=0: 1 + 0.5 * 1 - 0.5 = 1;                 A = 1 + 0.375 * 1.5 = 1.5625
+        assert_close("advantages", &adv, &[1.5625, 1.5, 2.5]);
+        // Without value_bootstrap a truncation is an end like termination: [1.375, 1, 2.5].
+        let plain = gae_learner(1, false);
+        let adv = to_vec(plain.gae(&three_steps(0.0, 1.0).rollout(&plain.device)));
+        assert_close("advantages without value_bootstrap", &adv, &[1.375, 1.0, 2.5]);
+    }
+
+    /// Episodes that end on the rollout's last step never read `last_value` (the value of the next
+    /// episode's first observation), whether truncated (world 0) or terminated (world 1).
+    #[test]
+    fn gae_ignores_the_last_value_after_an_end_on_the_last_step() {
+        let ppo = gae_learner(2, true);
+        let data = Data {
+            // [t][world]: r = [1, 2] and V = [0.5, 1] in both worlds.
+            reward: vec![1.0, 1.0, 2.0, 2.0],
+            value: vec![0.5, 0.5, 1.0, 1.0],
+            truncated: vec![0.0, 0.0, 1.0, 0.0],
+            terminated: vec![0.0, 0.0, 0.0, 1.0],
+            last_value: vec![100.0, 100.0],
+            ..Data::zeros(2, 2, 1)
+        };
+        let adv = to_vec(ppo.gae(&data.rollout(&ppo.device)));
+        // World 0, t=1 (truncated): 2 + 0.5 * 1 - 1 = 1.5;   t=0: 1 + 0.5 * 1 - 0.5 = 1, A = 1 + 0.375 * 1.5 = 1.5625
+        // World 1, t=1 (terminated): 2 - 1 = 1;             t=0: 1, A = 1 + 0.375 * 1 = 1.375
+        assert_close("advantages", &adv, &[1.5625, 1.375, 1.5, 1.0]);
+    }
+
+    /// Two worlds, an episode boundary in the middle of world 0's rollout only: each world's advantages are
+    /// its own.
+    #[test]
+    fn gae_keeps_worlds_apart_across_an_episode_boundary() {
+        let ppo = gae_learner(2, true);
+        let data = Data {
+            // [t][world]: world 0 r = [1, 2, 3], V = [0.5, 1, 1.5]; world 1 r = [0, 1, -1], V = [0, 0.5, 0.25].
+            reward: vec![1.0, 0.0, 2.0, 1.0, 3.0, -1.0],
+            value: vec![0.5, 0.0, 1.0, 0.5, 1.5, 0.25],
+            terminated: vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            last_value: vec![2.0, 1.0],
+            ..Data::zeros(3, 2, 1)
+        };
+        let adv = to_vec(ppo.gae(&data.rollout(&ppo.device)));
+        // World 0: t=2 2.5 and t=1 2.6875 (as without ends); t=0 terminated: 1 - 0.5 = 0.5.
+        // World 1: t=2: -1 + 0.5 * 1 - 0.25 = -0.75
+        //          t=1: 1 + 0.5 * 0.25 - 0.5 = 0.625;   A = 0.625 + 0.375 * -0.75 = 0.34375
+        //          t=0: 0 + 0.5 * 0.5 - 0 = 0.25;       A = 0.25 + 0.375 * 0.34375 = 0.37890625
+        assert_close("advantages", &adv, &[0.5, 0.378_906_25, 2.6875, 0.343_75, 2.5, -0.75]);
+    }
+
+    /// gamma 0 (so an advantage is r - V and a return is r), one epoch of one minibatch of the whole
+    /// rollout, no normalisation: the reported losses are the network's before its step.
+    fn loss_learner(batch: usize, action_dim: usize, tweak: impl FnOnce(&mut PpoConfig)) -> Ppo {
+        learner(batch, action_dim, |c| {
+            c.gamma = 0.0;
+            c.epochs = 1;
+            c.minibatch_size = batch;
+            c.normalize_value = false;
+            c.normalize_advantage = false;
+            c.clip_ratio = 0.2;
+            tweak(c);
+        })
+    }
+
+    /// log N(0; 0, 1) = -ln(2 pi) / 2: the log-density of an action at the mean with sigma 1.
+    const LOGP_AT_MEAN: f32 = -0.918_938_5;
+
+    /// The clipped surrogate with the ratio inside and outside [0.8, 1.2] on both sides, for positive and
+    /// negative advantages: min(ratio A, clip(ratio) A) takes the clipped term only where it is the smaller.
+    #[test]
+    fn clipped_surrogate_takes_the_pessimistic_term() {
+        let mut ppo = loss_learner(5, 1, |_| {});
+        // mu = 0, sigma = 1, V = 0: each action 0 has log-probability LOGP_AT_MEAN now.
+        set_network(&mut ppo, &[0.0], &[0.0], [0.0, 0.0], &[0.0]);
+        // Old log-probabilities LOGP_AT_MEAN - ln(ratio): ln 1.5 = 0.4054651, ln 0.5 = -0.6931472,
+        // ln 1.1 = 0.0953102. The advantages are the rewards (gamma 0, V = 0).
+        let data = Data {
+            logp: vec![-1.324_403_6, -0.225_791_35, -1.324_403_6, -0.225_791_35, -1.014_248_7],
+            reward: vec![1.0, 1.0, -1.0, -1.0, 2.0],
+            ..Data::zeros(5, 1, 1)
+        };
+        let stats = ppo.update(data.rollout(&ppo.device));
+        // ratio 1.5, A = +1: min(1.5, 1.2) = 1.2     (clipped above)
+        // ratio 0.5, A = +1: min(0.5, 0.8) = 0.5     (unclipped below)
+        // ratio 1.5, A = -1: min(-1.5, -1.2) = -1.5  (unclipped above)
+        // ratio 0.5, A = -1: min(-0.5, -0.8) = -0.8  (clipped below)
+        // ratio 1.1, A = +2: 2.2                     (inside the range)
+        // actor loss = -(1.2 + 0.5 - 1.5 - 0.8 + 2.2) / 5 = -1.6 / 5 = -0.32
+        assert_close("actor loss", &[stats.actor_loss], &[-0.32]);
+        // Value loss (V = 0 = old V, so clipping changes nothing): (1 + 1 + 1 + 1 + 4) / 5 = 1.6.
+        assert_close("critic loss", &[stats.critic_loss], &[1.6]);
+        assert_close("bounds loss", &[stats.bounds_loss], &[0.0]);
+        assert_close("mean reward", &[stats.mean_reward], &[0.4]);
+    }
+
+    /// The clipped value loss: max((V - R)^2, (V_old + clip(V - V_old, -0.2, 0.2) - R)^2), with the new
+    /// value V = 1 moved past the clip range above and below the rollout's values; and without `clip_value`
+    /// the plain squared error.
+    #[test]
+    fn clipped_value_loss_takes_the_larger_error() {
+        // V_old (the rollout's values) and R (= the rewards with gamma 0):
+        let data = Data {
+            value: vec![1.0, 0.5, 0.5, 1.5, 1.5],
+            reward: vec![0.0, 0.5, 2.0, 1.0, 2.0],
+            logp: vec![LOGP_AT_MEAN; 5],
+            ..Data::zeros(5, 1, 1)
+        };
+        let mut ppo = loss_learner(5, 1, |_| {});
+        set_network(&mut ppo, &[0.0], &[0.0], [0.0, 1.0], &[0.0]);
+        let stats = ppo.update(data.rollout(&ppo.device));
+        // V_old 1.0, R 0:   V - V_old = 0 inside;         max(1, 1) = 1
+        // V_old 0.5, R 0.5: clipped V 0.7;                max(0.25, 0.04) = 0.25
+        // V_old 0.5, R 2:   clipped V 0.7;                max(1, 1.69) = 1.69
+        // V_old 1.5, R 1:   clipped V 1.3;                max(0, 0.09) = 0.09
+        // V_old 1.5, R 2:   clipped V 1.3;                max(1, 0.49) = 1
+        // mean: (1 + 0.25 + 1.69 + 0.09 + 1) / 5 = 4.03 / 5 = 0.806
+        assert_close("clipped critic loss", &[stats.critic_loss], &[0.806]);
+        // Ratio 1 everywhere: the actor loss is -mean(A) = -mean(R - V_old) = -(-1 + 0 + 1.5 - 0.5 + 0.5) / 5.
+        assert_close("actor loss", &[stats.actor_loss], &[-0.1]);
+
+        let mut plain = loss_learner(5, 1, |c| c.clip_value = false);
+        set_network(&mut plain, &[0.0], &[0.0], [0.0, 1.0], &[0.0]);
+        let stats = plain.update(data.rollout(&plain.device));
+        // (1 + 0.25 + 1 + 0 + 1) / 5 = 3.25 / 5 = 0.65
+        assert_close("unclipped critic loss", &[stats.critic_loss], &[0.65]);
+    }
+
+    /// The bounds loss: per sample the sum over action entries of (mu - 1.1)^2 above 1.1 and
+    /// (mu + 1.1)^2 below -1.1, averaged over the minibatch.
+    #[test]
+    fn bounds_loss_penalises_means_beyond_the_soft_bound() {
+        let mut ppo = loss_learner(4, 2, |_| {});
+        // mu = (obs, -obs), V = 0.
+        set_network(&mut ppo, &[1.0, -1.0], &[0.0, 0.0], [0.0, 0.0], &[0.0, 0.0]);
+        let data = Data { obs: vec![0.5, 1.5, -2.0, 1.1], ..Data::zeros(4, 1, 2) };
+        let stats = ppo.update(data.rollout(&ppo.device));
+        // obs 0.5:  mu (0.5, -0.5) inside:                  0
+        // obs 1.5:  mu (1.5, -1.5): 0.4^2 + (-0.4)^2 =      0.32
+        // obs -2:   mu (-2, 2): (-0.9)^2 + 0.9^2 =          1.62
+        // obs 1.1:  mu (1.1, -1.1) on the bound:            0
+        // mean: (0 + 0.32 + 1.62 + 0) / 4 = 1.94 / 4 = 0.485
+        assert_close("bounds loss", &[stats.bounds_loss], &[0.485]);
+        assert_close("critic loss", &[stats.critic_loss], &[0.0]);
+    }
+
+    /// Advantage normalisation over the rollout: A = (3, 1) becomes ((3 - 2) / 1, (1 - 2) / 1) = (1, -1)
+    /// (population standard deviation sqrt(((1)^2 + (-1)^2) / 2) = 1, plus 1e-8), then clipped at ratio 1.5.
+    #[test]
+    fn advantages_are_normalised_over_the_rollout() {
+        let mut ppo = loss_learner(2, 1, |c| c.normalize_advantage = true);
+        set_network(&mut ppo, &[0.0], &[0.0], [0.0, 0.0], &[0.0]);
+        // Both at ratio 1.5 (old log-probability LOGP_AT_MEAN - ln 1.5).
+        let data = Data { logp: vec![-1.324_403_6; 2], reward: vec![3.0, 1.0], ..Data::zeros(2, 1, 1) };
+        let stats = ppo.update(data.rollout(&ppo.device));
+        // A = +1: min(1.5, 1.2) = 1.2;  A = -1: min(-1.5, -1.2) = -1.5;  loss = -(1.2 - 1.5) / 2 = 0.15
+        // (unnormalised it would be -(3.6 + 1.2) / 2 = -2.4).
+        assert_close("actor loss", &[stats.actor_loss], &[0.15]);
+    }
+
+    /// Value normalisation: the return statistics take in this rollout's returns (advantage + value) before
+    /// the value loss, which is then in normalised units.
+    #[test]
+    fn value_normalisation_merges_the_returns_then_scores_in_normalised_units() {
+        let mut ppo = loss_learner(2, 1, |c| c.normalize_value = true);
+        set_network(&mut ppo, &[0.0], &[0.0], [0.0, 0.0], &[0.0]);
+        // V_old = 0, returns R = r = (1, 3).
+        let data = Data { logp: vec![LOGP_AT_MEAN; 2], reward: vec![1.0, 3.0], ..Data::zeros(2, 1, 1) };
+        let stats = ppo.update(data.rollout(&ppo.device));
+        // Returns merged into the fresh statistics: mean (1 + 3) / 2 = 2, variance ((-1)^2 + 1^2) / 2 = 1.
+        assert_close("return mean", &to_vec(ppo.value_norm.mean.clone()), &[2.0]);
+        assert_close("return variance", &to_vec(ppo.value_norm.var.clone()), &[1.0]);
+        assert_eq!(ppo.value_norm.count, 2.0);
+        // With s = sqrt(1 + 1e-5) = 1.000005: R_n = (-1, 1) / s = -+0.999995, V_old,n = -2 / s = -1.99999,
+        // V = 0 (moved 1.99999 from V_old,n, clipped to +0.2: -1.79999).
+        // Sample R_n -0.999995: max(0.99999, (-1.79999 + 0.999995)^2 = 0.639992) = 0.99999
+        // Sample R_n +0.999995: max(0.99999, (-1.79999 - 0.999995)^2 = 7.839916) = 7.839916
+        // mean: (0.99999 + 7.839916) / 2 = 4.419953
+        assert_close("critic loss", &[stats.critic_loss], &[4.419_953]);
+    }
+}

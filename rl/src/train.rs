@@ -17,7 +17,7 @@ use crate::ppo::{DeviceEpisodes, EpisodeTracker, Ppo, UpdateStats};
 /// The learner's device for a config choice, and a name for logs.
 ///
 /// `wgpu` is burn's wgpu backend on the engine's own device (one `wgpu::Device` and queue serve the simulator
-/// and the learner, DESIGN.md section 1); it needs factory-rl's `wgpu` cargo feature. `cpu` is burn-flex on
+/// and the learner, docs/ARCHITECTURE.md section 2); it needs factory-rl's `wgpu` cargo feature. `cpu` is burn-flex on
 /// the host. `auto` takes wgpu when the engine's adapter is a hardware GPU and the feature is built, else
 /// flex: over a software rasteriser (lavapipe) flex trains the Table IX MLP several times faster
 /// (docs/BENCHMARKS.md).

@@ -1,5 +1,6 @@
 //! The Screw env resident on the device (`FrankaNutBoltDevice`) under the learner on burn's wgpu backend over
-//! the engine's device: issue 22's "nothing is read back per step except an explicit logging summary". Needs
+//! the engine's device: nothing is read back per step except an explicit logging summary (docs/ARCHITECTURE.md
+//! section 7). Needs
 //! `--features wgpu`; its own test binary, so the engine's process-wide sync count sees this test alone.
 
 #![cfg(feature = "wgpu")]

@@ -15,7 +15,7 @@ fn config(sets: &[&str]) -> TrainConfig {
     TrainConfig::load(&path, &sets).unwrap()
 }
 
-/// The learning test: PPO reaches > 95% success on a small task written against the same Env trait,
+/// The learning test: PPO reaches > 95% success on a small task written against the same Env trait,
 /// judged by 1024 evaluation episodes with deterministic actions in fresh worlds (another seed).
 #[test]
 fn ppo_learns_point_mass_reaching() {

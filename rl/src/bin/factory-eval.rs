@@ -1,55 +1,19 @@
-//! `factory-eval --policy FILE [--episodes 1024] [--envs 128] [--config FILE] [--set env.KEY=VALUE]... [--seed S] [--stochastic]
-//! [--forces-csv FILE] [--steps-csv FILE] [--json]`: runs an exported policy (its mean action; `--stochastic` samples with its sigma, as training
-//! does) and reports the columns of the paper's Tables IV and X-XII (success
-//! rate, mean env steps to success). The env is rebuilt from the policy file's own env config, or from
-//! `--config`'s `[env]` (refused, showing both specs, if it does not match what the policy was trained on).
-
-use std::path::PathBuf;
+//! `factory-eval --policy RUN_DIR/policy.json`: runs an exported policy (its mean action; `--stochastic`
+//! samples with its sigma, as training does) and reports the columns of the paper's Tables IV and X-XII
+//! (success rate, mean env steps to success) in the env's own outcome words, or as one JSON object with
+//! `--json`. The env is rebuilt from the policy file's own env config, or from `--config`'s `[env]`
+//! (refused, showing both specs, if it does not match what the policy was trained on). The flags are
+//! `factory-eval --help` (docs/CLI.md).
 
 use anyhow::{Context, Result};
 use clap::Parser;
 use factory_rl::checkpoint::PolicyFile;
+use factory_rl::cli::EvalArgs;
 use factory_rl::eval::{evaluate, EvalOptions, Trace};
 use factory_rl::TrainConfig;
 
-#[derive(Parser, Debug)]
-#[command(name = "factory-eval", about = "Evaluate an exported factory-rs policy")]
-struct Args {
-    /// The policy file (policy.json in a run folder).
-    #[arg(long)]
-    policy: PathBuf,
-    /// Episodes to evaluate.
-    #[arg(long, default_value_t = 1024)]
-    episodes: usize,
-    /// Worlds stepped together.
-    #[arg(long, default_value_t = 128)]
-    envs: usize,
-    /// Take the env from this training config instead of the policy file.
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// Override an env key, e.g. `--set 'env.randomize.hand_angle_deg=[-90, 90]'` (repeatable; env.* only).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    sets: Vec<String>,
-    /// Seed of the env's draws.
-    #[arg(long, default_value_t = 12345)]
-    seed: u64,
-    /// Write world 0's per-step contact-force norms at the fingers, nut and bolt (CSV; envs that measure them).
-    #[arg(long, value_name = "FILE")]
-    forces_csv: Option<PathBuf>,
-    /// Write world 0's observation, action, reward and done flags at every step (CSV, named columns).
-    #[arg(long, value_name = "FILE")]
-    steps_csv: Option<PathBuf>,
-    /// Sample actions with the policy's sigma (noise drawn from --seed), as in training, instead of its
-    /// mean (the default, as rl_games' player and the paper's tables).
-    #[arg(long)]
-    stochastic: bool,
-    /// Print one JSON object.
-    #[arg(long)]
-    json: bool,
-}
-
 fn main() -> Result<()> {
-    let args = Args::parse();
+    let args = EvalArgs::parse();
     let policy = PolicyFile::load(&args.policy)?;
     let env_cfg = match &args.config {
         Some(c) => TrainConfig::load(c, &[])?.env,
@@ -91,18 +55,12 @@ fn main() -> Result<()> {
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
-        println!(
-            "{} ({} actions): {} episodes, success {:.1}%, mean steps to success {:.1}, mean return {:.3}, mean joint torque \
-             norm {:.2} N m; ended: {}",
-            policy.env,
-            if report.stochastic { "sampled" } else { "mean" },
-            report.episodes,
-            100.0 * report.success_rate,
-            report.mean_steps_to_success,
-            report.mean_return,
-            report.mean_joint_torque_norm,
-            report.ended_by.summary()
-        );
+        print!("{}", report.summary(&policy.env, args.envs));
+        for (what, path) in [("forces", &args.forces_csv), ("steps", &args.steps_csv)] {
+            if let Some(p) = path {
+                println!("  wrote {what} {}", p.display());
+            }
+        }
     }
     Ok(())
 }

@@ -1,184 +1,31 @@
-//! `factory-train --config configs/screw.toml [--set key=value]... [--seed S] [--envs N] [--updates N]
-//! [--resume RUN_DIR] [--run-dir DIR] [--json]`: PPO training with a progress bar, metrics.csv and
+//! `factory-train --config configs/screw.toml`: PPO training with a progress bar, metrics.csv and
 //! TensorBoard event files in the run folder, atomic checkpoints every `train.checkpoint_every` updates,
-//! Ctrl-C (or SIGTERM, SIGHUP) saving and exiting cleanly, and the final policy exported to `policy.json`.
+//! Ctrl-C (or SIGTERM, SIGHUP) saving and exiting cleanly, the final policy exported to `policy.json` and a
+//! short summary at the end. The flags are `factory-train --help` (docs/CLI.md).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::{SystemTime, UNIX_EPOCH};
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use factory_rl::run_dir::{checkpoint_path, policy_path, utc_stamp, MetricsCsv};
-use factory_rl::train::{resolve_device, RecentEpisodes, Trainer};
+use factory_rl::cli::TrainArgs;
+use factory_rl::run_dir::{checkpoint_path, policy_path, utc_stamp};
+use factory_rl::session::{run_session, Progress};
+use factory_rl::train::{resolve_device, Trainer};
 use factory_rl::TrainConfig;
-use indicatif::{ProgressBar, ProgressStyle};
-
-#[derive(Parser, Debug)]
-#[command(name = "factory-train", about = "Train a PPO policy on a factory-rs env")]
-struct Args {
-    /// The training config (TOML). Not needed with --resume.
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// Override a config key, e.g. `--set ppo.horizon=64` (repeatable).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    sets: Vec<String>,
-    /// Seed (same as --set seed=S).
-    #[arg(long)]
-    seed: Option<u64>,
-    /// Worlds stepped together (same as --set train.env_count=N).
-    #[arg(long)]
-    envs: Option<usize>,
-    /// Total PPO updates (same as --set train.updates=N; with --resume, the new total).
-    #[arg(long)]
-    updates: Option<usize>,
-    /// Continue the run in this folder from its checkpoint.
-    #[arg(long, value_name = "RUN_DIR")]
-    resume: Option<PathBuf>,
-    /// Where the run goes (default runs/<config-stem>/<UTC timestamp>).
-    #[arg(long, value_name = "DIR")]
-    run_dir: Option<PathBuf>,
-    /// One JSON object per update on stdout instead of the progress bar.
-    #[arg(long)]
-    json: bool,
-}
 
 fn main() -> Result<()> {
-    let args = Args::parse();
+    let args = TrainArgs::parse();
     let (mut trainer, run) = match &args.resume {
-        Some(run) => {
-            if args.config.is_some() || !args.sets.is_empty() || args.seed.is_some() || args.envs.is_some() {
-                bail!("--resume continues the run with its saved config; only --updates may change");
-            }
-            let ck = checkpoint_path(run);
-            let mut name = String::new();
-            let mut t = Trainer::resume_on(&ck, |cfg| {
-                let (device, n) = resolve_device(cfg.ppo.device)?;
-                name = n;
-                Ok(device)
-            })
-            .with_context(|| format!("resuming {}", run.display()))?;
-            if let Some(u) = args.updates {
-                t.cfg.train.updates = u;
-            }
-            eprintln!("resuming {} at update {} on {name}; env on {}", run.display(), t.updates_done, t.run.place());
-            (t, run.clone())
-        }
-        None => {
-            let Some(config) = &args.config else { bail!("give --config FILE (or --resume RUN_DIR)") };
-            let mut sets = args.sets.clone();
-            if let Some(s) = args.seed {
-                sets.push(format!("seed={s}"));
-            }
-            if let Some(n) = args.envs {
-                sets.push(format!("train.env_count={n}"));
-            }
-            if let Some(u) = args.updates {
-                sets.push(format!("train.updates={u}"));
-            }
-            let cfg = TrainConfig::load(config, &sets)?;
-            let run = match &args.run_dir {
-                Some(d) => d.clone(),
-                None => {
-                    let stem = config.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or("run".into());
-                    let now = SystemTime::now().duration_since(UNIX_EPOCH)?.as_secs();
-                    Path::new("runs").join(stem).join(utc_stamp(now))
-                }
-            };
-            if checkpoint_path(&run).exists() {
-                bail!("{} already holds a run; continue it with --resume {0}", run.display());
-            }
-            std::fs::create_dir_all(&run).with_context(|| format!("creating {}", run.display()))?;
-            let (device, name) = resolve_device(cfg.ppo.device)?;
-            let t = Trainer::new(cfg, device)?;
-            eprintln!("run {} on {name}; env on {}", run.display(), t.run.place());
-            (t, run)
-        }
+        Some(run) => resume(&args, run)?,
+        None => start(&args)?,
     };
-    factory_rl::checkpoint::write_atomic(&run.join("config.toml"), trainer.cfg.to_toml().as_bytes())?;
-    let mut csv = MetricsCsv::open(&run, trainer.updates_done)?;
-    let mut tb = tensorboard_rs::summary_writer::SummaryWriter::new(run.join("tb"));
-
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        // Ctrl-C, and SIGTERM / SIGHUP (a cluster's scheduler preempting the job, a closed terminal): finish
-        // the update, save, exit. A second signal exits at once; the last checkpoint is whole (atomic).
-        ctrlc::set_handler(move || {
-            if stop.swap(true, Ordering::SeqCst) {
-                eprintln!("second interrupt: exiting now; the last checkpoint is kept");
-                std::process::exit(130);
-            }
-            eprintln!("interrupt: saving after this update (again to exit now)");
-        })
-        .context("installing the Ctrl-C / SIGTERM handler")?;
-    }
-    let total = trainer.cfg.train.updates;
-    let bar = if args.json {
-        ProgressBar::hidden()
-    } else {
-        let b = ProgressBar::new(total as u64);
-        b.set_style(
-            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} updates  {msg}")
-                .expect("valid template")
-                .progress_chars("=> "),
-        );
-        b.set_position(trainer.updates_done as u64);
-        b
-    };
-    let every = trainer.cfg.train.checkpoint_every;
-    let started = Instant::now();
-    let steps_at_start = trainer.env_steps;
-    let mut interrupted = false;
-    let mut recent = RecentEpisodes::new(50);
-    while trainer.updates_done < total {
-        let r = trainer.update();
-        recent.push(&r);
-        csv.row(&r, trainer.wall_seconds)?;
-        let sps = (trainer.env_steps - steps_at_start) as f64 / started.elapsed().as_secs_f64();
-        let step = r.update;
-        for (tag, v) in [
-            ("episode/success_rate", r.success_rate),
-            ("episode/mean_return", r.mean_return),
-            ("loss/actor", r.stats.actor_loss),
-            ("loss/critic", r.stats.critic_loss),
-            ("loss/bounds", r.stats.bounds_loss),
-            ("policy/sigma", r.stats.sigma),
-            ("perf/env_steps_per_second", sps as f32),
-        ] {
-            if v.is_finite() {
-                tb.add_scalar(tag, v, step);
-            }
-        }
-        for (cause, count) in &r.ended_by.0 {
-            tb.add_scalar(&format!("episode/ended_{cause}"), *count as f32, step);
-        }
-        if args.json {
-            println!("{}", serde_json::json!({"report": r, "env_steps_per_second": sps}));
-        } else {
-            bar.set_position(step as u64);
-            bar.set_message(format!(
-                "{sps:.0} env-steps/s  reward {:.4}/step  {}",
-                r.stats.mean_reward,
-                recent.summary()
-            ));
-        }
-        if step % every == 0 || step == total {
-            trainer.save_checkpoint(&checkpoint_path(&run))?;
-            trainer.export_policy(&policy_path(&run))?;
-            tb.flush();
-        }
-        if stop.load(Ordering::SeqCst) {
-            interrupted = true;
-            break;
-        }
-    }
-    trainer.save_checkpoint(&checkpoint_path(&run))?;
-    trainer.export_policy(&policy_path(&run))?;
-    tb.flush();
-    bar.finish_and_clear();
-    if interrupted {
+    let stop = stop_on_signal()?;
+    let progress = if args.json { Progress::Json } else { Progress::Bar };
+    let s = run_session(&mut trainer, &run, progress, &stop)?;
+    if s.interrupted {
         eprintln!(
             "interrupted at update {}: saved; continue with  factory-train --resume {}",
             trainer.updates_done,
@@ -193,5 +40,99 @@ fn main() -> Result<()> {
             policy_path(&run).display()
         );
     }
+    if !args.json {
+        let rows = [
+            ("speed", s.speed_line()),
+            ("episodes", s.episodes.clone()),
+            ("run folder", run.display().to_string()),
+            ("evaluate", format!("factory-eval --policy {}", policy_path(&run).display())),
+            ("plot", format!("factory-plot --metrics {} --out curve.svg", run.join("metrics.csv").display())),
+        ];
+        for (label, value) in rows {
+            eprintln!("  {label:<12}  {value}");
+        }
+    }
     Ok(())
+}
+
+/// The trainer and run folder of `--resume RUN_DIR` (only `--updates` may change).
+fn resume(args: &TrainArgs, run: &Path) -> Result<(Trainer, PathBuf)> {
+    if args.config.is_some() || !args.sets.is_empty() || args.seed.is_some() || args.envs.is_some() {
+        bail!("--resume continues the run with its saved config; only --updates may change");
+    }
+    let ck = checkpoint_path(run);
+    let mut name = String::new();
+    let mut t = Trainer::resume_on(&ck, |cfg| {
+        let (device, n) = resolve_device(cfg.ppo.device)?;
+        name = n;
+        Ok(device)
+    })
+    .with_context(|| format!("resuming {}", run.display()))?;
+    if let Some(u) = args.updates {
+        t.cfg.train.updates = u;
+    }
+    eprintln!("resuming {} at update {} on {name}; env on {}", run.display(), t.updates_done, t.run.place());
+    Ok((t, run.to_path_buf()))
+}
+
+/// The config a run without `--config` trains: a few Screw updates on 4 worlds, the whole loop (simulator,
+/// controller, learner, checkpoints) in a few minutes on a CPU.
+const DEFAULT_CONFIG: &str = include_str!("../../../configs/screw_quick.toml");
+/// How errors and the run name refer to [`DEFAULT_CONFIG`].
+const DEFAULT_CONFIG_NAME: &str = "configs/screw_quick.toml (built in)";
+
+/// A new trainer from `--config` and the overrides, and its new run folder.
+fn start(args: &TrainArgs) -> Result<(Trainer, PathBuf)> {
+    let mut sets = args.sets.clone();
+    if let Some(s) = args.seed {
+        sets.push(format!("seed={s}"));
+    }
+    if let Some(n) = args.envs {
+        sets.push(format!("train.env_count={n}"));
+    }
+    if let Some(u) = args.updates {
+        sets.push(format!("train.updates={u}"));
+    }
+    let (cfg, stem) = match &args.config {
+        Some(config) => {
+            let stem = config.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or("run".into());
+            (TrainConfig::load(config, &sets)?, stem)
+        }
+        None => {
+            eprintln!("no --config: the built-in short Screw run ({DEFAULT_CONFIG_NAME})");
+            (TrainConfig::from_str_with(DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, &sets)?, "screw_quick".to_string())
+        }
+    };
+    let run = match &args.run_dir {
+        Some(d) => d.clone(),
+        None => {
+            let now = SystemTime::now().duration_since(UNIX_EPOCH)?.as_secs();
+            Path::new("runs").join(stem).join(utc_stamp(now))
+        }
+    };
+    if checkpoint_path(&run).exists() {
+        bail!("{} already holds a run; continue it with --resume {0}", run.display());
+    }
+    std::fs::create_dir_all(&run).with_context(|| format!("creating {}", run.display()))?;
+    let (device, name) = resolve_device(cfg.ppo.device)?;
+    let t = Trainer::new(cfg, device)?;
+    eprintln!("run {} on {name}; env on {}", run.display(), t.run.place());
+    Ok((t, run))
+}
+
+/// Ctrl-C, and SIGTERM / SIGHUP (a cluster's scheduler preempting the job, a closed terminal): the flag the
+/// loop reads to finish the update, save and exit. A second signal exits at once; the last checkpoint is
+/// whole (atomic).
+fn stop_on_signal() -> Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            eprintln!("second interrupt: exiting now; the last checkpoint is kept");
+            std::process::exit(130);
+        }
+        eprintln!("interrupt: saving after this update (again to exit now)");
+    })
+    .context("installing the Ctrl-C / SIGTERM handler")?;
+    Ok(stop)
 }
