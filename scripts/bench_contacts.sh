@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # Contact-handling benchmark behind docs/BENCHMARKS.md: our generated M16 nut-bolt and 4 mm peg-hole, and
-# Factory's own meshes (../shared/peer_assets, for cross-checks only), at 1, 64 and 1024 worlds.
+# Factory's own meshes (from $FACTORY_PEER_ASSETS, Factory's asset tree; for cross-checks only), at 1, 64
+# and 1024 worlds.
 # Usage: scripts/bench_contacts.sh OUT.jsonl
 set -euo pipefail
 out=${1:-bench_contacts.jsonl}
 bin=${CARGO_TARGET_DIR:-$HOME/.cache/factory-rs/target}/release/factory-bench
-mesh=$(cd "$(dirname "$0")/../.." && pwd)/shared/peer_assets/factory/mesh
+mesh=${FACTORY_PEER_ASSETS:?set FACTORY_PEER_ASSETS to Factory's asset tree (meshes under factory/mesh/)}/factory/mesh
 frames() { case $1 in 1) echo 20;; 64) echo 3;; *) echo 1;; esac; }
 for w in 1 64 1024; do
   cpu=""; [ "$w" != 1024 ] && cpu="--cpu"

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Contact handling (generate + merge + normals) of builds side by side, round robin (docs/BENCHMARKS.md,
-# "Contact handling on lavapipe: what costs"): M16 nut-bolt, coarse nut (48 segments per turn, 4 descent
+# "Contact handling"): M16 nut-bolt, coarse nut (48 segments per turn, 4 descent
 # iterations), analytic bolt SDF, W worlds, 10 frames per run, R rounds.
 # Usage: scripts/bench_contacts_ab.sh R W OUT.jsonl BIN...  (BIN: factory-bench binaries built at the commits
 # compared, each optionally followed by '|' and extra options, e.g. 'target/release/factory-bench|--per 4').

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Nut-bolt speed of two builds side by side in one run (docs/BENCHMARKS.md, "The solver's storage reads"):
+# Nut-bolt speed of two builds side by side in one run (docs/BENCHMARKS.md):
 # for each world count, build A then build B, each at mu 0.05 and 0 (coarse nut: 48 segments per turn,
 # 4 descent iterations). Usage: scripts/bench_nut_bolt_ab.sh BIN_A BIN_B OUT.jsonl
 # (BIN_*: factory-bench binaries, e.g. copies of target/release/factory-bench built at two commits; each

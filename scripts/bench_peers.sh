@@ -2,8 +2,8 @@
 # The nut-and-bolt scene in the peers and in factory-rs, one after another in one run (docs/BENCHMARKS.md,
 # "Peers side by side"): these machines differ by 3x from one session to the next, so only figures taken
 # in the same run compare. MuJoCo's procedural toy brackets the run (first and last) to show the machine
-# held still. Peers come from ../shared/peers (its setup.sh makes the virtual environments; copy the folder
-# if it is read-only); a peer whose environment is missing is skipped and says so.
+# held still. The peers' scripts are not part of this repository: PEERS_DIR holds them and their virtual
+# environments; a peer whose environment is missing is skipped and says so.
 # Usage: scripts/bench_peers.sh PEERS_DIR OUT.txt [FACTORY_BENCH] [ASSETS_DIR]
 #   FACTORY_ARGS (environment): extra options for the factory-rs runs (e.g. "--per 4")
 #   PEERS_DIR: folder with mujoco_nutbolt.py, newton_nutbolt.py and their .venv-mujoco / .venv-newton

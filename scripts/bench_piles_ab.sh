@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Small pile scenes of two builds side by side (docs/BENCHMARKS.md, "Contact handling on lavapipe: what
-# costs"): 32 toruses for 0.5 s, 8 bowls and 8 nuts for 1 s, coloured solver, build A then build B each.
+# Small pile scenes of two builds side by side (docs/BENCHMARKS.md,
+# "Piles of parts"): 32 toruses for 0.5 s, 8 bowls and 8 nuts for 1 s, coloured solver, build A then build B each.
 # Usage: scripts/bench_piles_ab.sh BIN_A BIN_B OUT.jsonl (factory-bench binaries built at two commits).
 set -euo pipefail
 a=$1 b=$2 out=$3

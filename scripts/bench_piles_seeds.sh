@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Whether 64-nut piles come to rest, over several seeds and solver settings, for one or more builds
-# (docs/BENCHMARKS.md, "What keeps the nut piles moving, third look"): one drop of 64 nuts decides little,
+# (docs/BENCHMARKS.md, "Piles of parts"): one drop of 64 nuts decides little,
 # since which nut ends on a flat or leans on a neighbour changes with every detail of the run, so compare
 # builds over the same seeds. Settings: T2 (Table II: 1 substep, 16 + 1 iterations), S2 (2 substeps, 32 + 4:
 # the 64-nut test's). Usage: scripts/bench_piles_seeds.sh OUT.jsonl SEEDS BIN... (SEEDS e.g. "1 2 3 4";

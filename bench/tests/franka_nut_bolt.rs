@@ -7,7 +7,7 @@ use factory_engine::articulation::dynamics::world_dynamics;
 use factory_engine::gpu::GpuContext;
 use glam::Vec3;
 
-/// Issue 21: the gripper holds the M16 nut against gravity for 10 s with less than 0.5 mm slip.
+/// The gripper holds the M16 nut against gravity for 10 s with less than this slip [m].
 const SLIP_MAX: f32 = 0.5e-3;
 
 /// The nut's origin in the fingertip frame of world `w` [m].
@@ -63,17 +63,20 @@ fn gripper_holds_the_m16_nut_against_gravity_for_10_s() {
     }
 }
 
-/// The scripted Franka + nut-and-bolt scene over 64 worlds, each with its own drawn nut position and yaw:
-/// no world diverges, and the nut ends seated (within one pitch of seated, on the bolt's axis) in at least
-/// SEATED_MIN of them, issue 21's 95%. Measured 64 of 64 (2026-12-04, commit f4fc108 plus the chamfer on).
-/// Regression test for the bolt's flat-cut tip: 47 of 64 (73%), the nut jamming part-way down the thread or
-/// the pads slipping on it as it landed on the tip (docs/BENCHMARKS.md).
-const SEATED_MIN: f64 = 0.95;
+/// Worlds of the seat test: the first 16 of the benchmark's 64-world draw (`factory-bench scene
+/// franka-nut-bolt --worlds 64 --seed 1`, docs/BENCHMARKS.md), each with its own drawn nut position on the
+/// table and yaw. The benchmark's figure is the share seated over 64; the test asks every one of its 16.
+const SEAT_WORLDS: u32 = 16;
 
+/// The scripted Franka + nut-and-bolt scene: no world diverges, every world reaches the screw stage, and the
+/// nut ends seated (within one pitch of seated, on the bolt's axis) in every world. Regression test for the
+/// bolt's flat-cut tip, where the nut jams part-way down the thread or the pads slip on it as it lands on
+/// the tip (docs/BENCHMARKS.md).
 #[test]
-fn franka_nut_bolt_seats_the_nut_in_most_of_64_worlds() {
+fn franka_nut_bolt_seats_the_nut_in_every_one_of_16_worlds() {
     let gpu = GpuContext::global().unwrap();
-    let report = run_franka_nut_bolt(gpu, &FrankaNutBoltRun { worlds: 64, ..Default::default() }).unwrap();
+    let run = FrankaNutBoltRun { worlds: SEAT_WORLDS, seed: 1, ..Default::default() };
+    let report = run_franka_nut_bolt(gpu, &run).unwrap();
     eprintln!("{}", report.summary());
     for (w, (h, off)) in report.nut_height_mm.iter().zip(&report.nut_off_axis_mm).enumerate() {
         if *h > 2.0 || *off > 8.0 {
@@ -81,13 +84,17 @@ fn franka_nut_bolt_seats_the_nut_in_most_of_64_worlds() {
         }
     }
     assert_eq!(report.diverged_worlds, 0);
-    assert!(report.stage_reached[5] == 64, "every world should reach the screw stage: {:?}", report.stage_reached);
-    assert!(report.success_rate >= SEATED_MIN, "seated in {:.1}% of 64 worlds", report.success_rate * 100.0);
+    assert!(
+        report.stage_reached[5] == SEAT_WORLDS,
+        "every world should reach the screw stage: {:?}",
+        report.stage_reached
+    );
+    assert_eq!(report.success_rate, 1.0, "seated in {:.1}% of {SEAT_WORLDS} worlds", report.success_rate * 100.0);
 }
 
 /// The same script with the coupled solve on the device (solver::articulated; lavapipe on CI), one world
-/// through the whole episode: picked, placed and seated, nothing diverged. Measured: seated at 39.0 s (the
-/// host: 39.2 s), deepest contact 0.15 mm (2026-12-05).
+/// through the whole episode: picked, placed and seated, nothing diverged, contacts no deeper than 1 mm (the
+/// host solve's world seats at about the same time, 39 s).
 #[test]
 fn the_device_solve_seats_the_nut() {
     let gpu = GpuContext::global().unwrap();

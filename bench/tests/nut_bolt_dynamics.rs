@@ -1,4 +1,4 @@
-//! Dynamics of the M16 nut on its bolt against the analytic reference (DESIGN section 6): a frictionless
+//! Dynamics of the M16 nut on its bolt against the analytic reference (docs/ARCHITECTURE.md section 10): a frictionless
 //! rigid nut on a helix descends with a = g m / (m + I (2 pi / p)^2), I its inertia about the axis, p the
 //! pitch, and advances one pitch per turn. Contacts come from the GPU pipeline (analytic bolt SDF), the
 //! solver is the GPU step and the CPU reference `solver::step_cpu`. Also: the nut resting on a table.
@@ -12,7 +12,7 @@ use factory_engine::solver::gpu::GpuSolver;
 use factory_engine::solver::{step_cpu_with_pipeline, BodyModel, BodyState, Control, SolverConfig, WarmStart};
 use glam::Vec3;
 
-/// Descent after 1 s within 5% of the analytic value (the issue's tolerance).
+/// Descent after 1 s within 5% of the analytic value.
 const DESCENT_TOL: f64 = 0.05;
 /// Descent per turn within 2% of the pitch.
 const LEAD_TOL: f64 = 0.02;
@@ -122,16 +122,16 @@ fn assert_analytic_descent(r: &Run, who: &str) {
 
 /// The nut of the speed figures (docs/BENCHMARKS.md, `factory-bench scene nut-bolt --segments-per-turn 48
 /// --descent-iters 4 [--per 4 [--workgroup 32]]`: "Model only what the scene needs") at the paper's solver settings (1 substep, 20 + 1
-/// iterations), on the GPU: the issue's speed goal holds "with the accuracy above", so this nut must meet
+/// iterations), on the GPU: the speed figures are quoted with the accuracy above, so this nut must meet
 /// it too. Frictionless it descends at the analytic rate; at the paper's mu 0.05 (above the critical
-/// 0.0375) it stays: its descent after 1 s within LOCKED_DRIFT (measured 2026-12-02: 0.0055 mm). Its
+/// 0.0375) it stays: its descent after 1 s within LOCKED_DRIFT (measured: 0.0055 mm). Its
 /// excursion at every frame is not asserted: at 1 substep the fine nut jitters by up to 22 um inside its
 /// axial play (see LOCK_SUBSTEPS).
 #[test]
 fn the_benchmarks_coarse_nut_keeps_the_analytic_descent_and_holds_at_the_papers_friction() {
     let thread = ThreadOptions { segments_per_turn: 48, ..Default::default() };
     // One candidate per invocation (the default) and four (`--per 4`, with 64 or 32 invocations per
-    // workgroup: the speed figures' since 2026-12-03).
+    // workgroup: the speed figures' settings).
     for (workgroup_size, per) in [(64, 1), (64, 4), (32, 4)] {
         let contact =
             ContactConfig { iterations: 4, workgroup_size, candidates_per_invocation: per, ..Default::default() };
@@ -144,13 +144,13 @@ fn the_benchmarks_coarse_nut_keeps_the_analytic_descent_and_holds_at_the_papers_
     }
 }
 
-/// Self-locking (DESIGN section 6): the nut holds when mu exceeds about tan(lead angle) cos(30 deg)
+/// Self-locking (docs/ARCHITECTURE.md section 10): the nut holds when mu exceeds about tan(lead angle) cos(30 deg)
 /// (M16: 0.0433 * 0.866 = 0.0375) and turns down the thread when mu is clearly below.
 const LOCKED_DRIFT: f64 = 0.01e-3;
 
 /// Held, the nut must stay within LOCKED_DRIFT at every frame, not only at 1 s. With the paper's 1 substep
-/// and 20 iterations the held nut jitters inside its 22 um axial play: by up to 18 um before warm starting,
-/// and still by 22 um with it (descent 0.011 mm in 1 s; 24 um with patch_iters 8; measured 2026-11-22: its
+/// and 20 iterations the held nut jitters inside its 22 um axial play: by up to 18 um without warm starting,
+/// and still by 22 um with it (descent 0.011 mm in 1 s; 24 um with patch_iters 8; measured: its
 /// ~200 contacts change slots from frame to frame, so few rows inherit impulses; 21.5 um with friction per
 /// patch, SolverConfig::friction_per_patch); 4 substeps converge
 /// (excursion 0.6 um), so this test runs at 4.
@@ -167,7 +167,7 @@ fn m16_nut_self_locks_above_the_critical_friction_and_turns_below() {
     assert!(free.descent > 0.9e-3 && free.yaw < -0.4, "mu 0.01: descent {} m, yaw {}", free.descent, free.yaw);
 }
 
-/// Issue 4: "a nut resting on a table drifts < 1e-3 mm/s". The M16 nut (its full threaded mesh, 11.6k query
+/// A nut resting on a table drifts less than 1e-3 mm/s. The M16 nut (its full threaded mesh, 11.6k query
 /// triangles) set down flat 0.1 mm above the table (the exact half-space), at the paper's settings (1
 /// substep, 20 + 1 iterations), steel on steel; after 1 s to settle, its centre of mass moves less than
 /// REST_DRIFT over the next 2 s. GPU solver and CPU reference.

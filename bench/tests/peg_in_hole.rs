@@ -1,4 +1,4 @@
-//! Peg-in-hole dynamics (issue 4, DESIGN section 6: "a peg drops into a hole with its ISO clearance") on our
+//! Peg-in-hole dynamics (docs/ARCHITECTURE.md section 10: a peg drops into a hole with its ISO clearance) on our
 //! generated 4 mm tight round peg and hole (factory-assets; diametral clearance 0.104 mm, Table VII), on the GPU
 //! solver with the CPU reference `step_cpu` run on the same scene (contacts from the GPU pipeline every frame
 //! in both cases; the GPU path submits contacts + solver as one command buffer per frame).
@@ -7,8 +7,8 @@
 //! z = 0), so the bore's bottom is the table: a peg that goes all the way down rests on the table inside the
 //! bore. Pairs by Factory's rules (`contact::roles::pair_spec`): peg vs hole, the peg's exact round field
 //! (`ShapeGeometry::Revolved`, which takes the SDF role) against the hole's 1024 triangles; peg vs table, the
-//! peg's triangles against the exact half-space. Solver at Factory's task settings (DESIGN 4.4: dt = 1/60 s,
-//! 2 substeps, 16 position iterations) with 8 passes per patch (PATCH_ITERS).
+//! peg's triangles against the exact half-space. Solver at Factory's task settings (docs/ARCHITECTURE.md
+//! section 6: dt = 1/60 s, 2 substeps, 16 position iterations) with 8 passes per patch (PATCH_ITERS).
 
 use factory_assets::{peg_hole, Fit, PegHole, PegHoleOptions, PegSize};
 use factory_engine::contact::roles::{pair_spec, ShapeDesc, ShapeGeometry};
@@ -105,8 +105,8 @@ fn scene_with_bore(hole: &factory_engine::mesh::TriMesh) -> ContactModel {
     ContactModel { body_count: 1, pairs: vec![a, b] }
 }
 
-/// Solver settings of the peg scenes: Factory's task settings (DESIGN 4.4) with PATCH_ITERS passes per
-/// patch and sweep.
+/// Solver settings of the peg scenes: Factory's task settings (docs/ARCHITECTURE.md section 6) with
+/// PATCH_ITERS passes per patch and sweep.
 fn solver_config() -> SolverConfig {
     SolverConfig { substeps: 2, pos_iters: 16, vel_iters: 1, patch_iters: PATCH_ITERS, ..Default::default() }
 }
@@ -334,9 +334,8 @@ fn push_in_hand(tilt: f32, bottom: Vec3, on_gpu: bool) -> Vec<BodyState> {
 /// cannot pass a 4.1 mm bore deeper than (D - d cos t) / tan t - (d / 2) sin t = 1.0 mm below a sharp rim
 /// (more with the chamfers). `an_aligned_peg_pushed_in_the_same_hand_goes_to_the_bottom` is the control:
 /// the same hand and push, aligned, go all the way.
-/// Regression, 2026-11-22: a free peg (no hand; before there was an external-force API, pushed by a 3 g
-/// gravity) was levered out over the rim instead, and a free peg pushed along its axis topples about the
-/// mouth's chamfer: jamming needs the support a hand gives.
+/// Why the hand: a free peg (no hand, pushed by a 3 g gravity) is levered out over the rim instead, and a
+/// free peg pushed along its axis topples about the mouth's chamfer: jamming needs the support a hand gives.
 #[test]
 fn a_tilted_peg_pushed_into_the_hole_jams() {
     let hole_top = factory_assets::peg_hole::HOLE_HEIGHT as f32;
