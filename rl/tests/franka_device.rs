@@ -1,11 +1,11 @@
 //! The Screw env resident on the device (`FrankaNutBoltDevice`) under the learner on burn's wgpu backend over
 //! the engine's device: nothing is read back per step except an explicit logging summary (docs/ARCHITECTURE.md
-//! section 7). Needs
-//! `--features wgpu`; its own test binary, so the engine's process-wide sync count sees this test alone.
+//! section 7). Needs `--features wgpu`. The engine's sync count is process-wide: the tests here take turns.
 
 #![cfg(feature = "wgpu")]
 
 use std::path::PathBuf;
+use std::sync::Mutex;
 
 use factory_engine::gpu::host_syncs;
 use factory_envs::franka::device_env::FrankaNutBoltDevice;
@@ -18,8 +18,13 @@ use factory_rl::TrainConfig;
 /// (its readback choke point) nor in the engine (readbacks and waits); each update then reads its summary
 /// once, with finite losses and the episode tallies (episodes of 5 steps: an end per world per rollout at
 /// least), every failure counted under its cause.
+/// `host_syncs` counts every thread's readbacks and waits, so the tests of this binary take turns: the
+/// checkpoint test's readbacks, counted during the rollout test's rollout, failed it when they overlapped.
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
 #[test]
 fn a_franka_device_rollout_reads_nothing_back_per_step() {
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let (device, name) = factory_rl::train::engine_wgpu_device().expect("the engine's wgpu device");
     eprintln!("learner on {name}");
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../configs/screw_quick.toml");
@@ -59,6 +64,7 @@ fn a_franka_device_rollout_reads_nothing_back_per_step() {
 /// compared here.)
 #[test]
 fn a_franka_device_checkpoint_carries_the_env_state() {
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     use factory_rl::train::{EnvRun, Trainer};
     let (device, _) = factory_rl::train::engine_wgpu_device().expect("the engine's wgpu device");
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../configs/screw_quick.toml");
