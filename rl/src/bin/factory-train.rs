@@ -99,7 +99,7 @@ fn start(args: &TrainArgs) -> Result<(Trainer, PathBuf)> {
             (TrainConfig::load(config, &sets)?, stem)
         }
         None => {
-            eprintln!("no --config: the built-in short Screw run ({DEFAULT_CONFIG_NAME})");
+            eprintln!("no --config: the built-in short Screw run, {DEFAULT_CONFIG_NAME}");
             (TrainConfig::from_str_with(DEFAULT_CONFIG, DEFAULT_CONFIG_NAME, &sets)?, "screw_quick".to_string())
         }
     };
