@@ -16,4 +16,6 @@ pub mod eval;
 pub mod plot;
 pub mod run_dir;
 pub mod session;
+#[cfg(test)]
+mod test_support;
 pub mod train;

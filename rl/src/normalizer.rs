@@ -70,16 +70,7 @@ impl RunningMeanStd {
 mod tests {
     use super::*;
     use crate::model::to_vec;
-
-    /// f32 arithmetic on a handful of values: the hand results hold to a few ulps (relative above 1).
-    const TOL: f32 = 1e-5;
-
-    fn assert_close(what: &str, actual: &[f32], expected: &[f32]) {
-        assert_eq!(actual.len(), expected.len(), "{what}: {actual:?} against {expected:?}");
-        for (a, e) in actual.iter().zip(expected) {
-            assert!((a - e).abs() <= TOL * e.abs().max(1.0), "{what}: {actual:?}, expected {expected:?}");
-        }
-    }
+    use crate::test_support::assert_close;
 
     fn rows(v: &[[f32; 2]]) -> Tensor<2> {
         let flat: Vec<f32> = v.iter().flatten().copied().collect();

@@ -536,16 +536,7 @@ impl Ppo {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// f32 arithmetic on a handful of values: the hand results hold to a few ulps.
-    const TOL: f32 = 1e-5;
-
-    fn assert_close(what: &str, actual: &[f32], expected: &[f32]) {
-        assert_eq!(actual.len(), expected.len(), "{what}: {actual:?} against {expected:?}");
-        for (a, e) in actual.iter().zip(expected) {
-            assert!((a - e).abs() <= TOL * e.abs().max(1.0), "{what}: {actual:?}, expected {expected:?}");
-        }
-    }
+    use crate::test_support::assert_close;
 
     /// A learner on burn-flex with observations and actions of `action_dim` entries per world and no hidden
     /// layer, after `tweak` sets its config.
