@@ -13,7 +13,7 @@
 //! business (bounding spheres, `contact::generate::pair_far_cpu`), so far pairs cost a skipped workgroup.
 //!
 //! Two solvers ([`PileSolver`]):
-//! - `coloured` (default): the many-body world of `factory_engine::crowd`: each frame the near pairs are
+//! - `coloured` (default): the many-body world of `factory_engine::many_body`: each frame the near pairs are
 //!   found on the GPU (bounding spheres), their contacts generated and reduced, and the Gauss-Seidel sweep
 //!   cut into one dispatch per colour of a graph colouring of the pairs: any number of bodies (the
 //!   paper's 1024).
@@ -28,9 +28,9 @@ use factory_assets::{nut_bolt, Fit, IsoSize, ThreadOptions};
 use factory_engine::contact::{
     ContactConfig, ContactModel, ContactPipeline, PairSpec, QueryShape, SdfShape, TransformGpu, NO_BODY,
 };
-use factory_engine::crowd::gpu::CrowdPipeline;
-use factory_engine::crowd::{CrowdConfig, CrowdFlat, CrowdModel, SleepConfig};
 use factory_engine::gpu::GpuContext;
+use factory_engine::many_body::gpu::ManyBodyPipeline;
+use factory_engine::many_body::{ManyBodyConfig, ManyBodyFlat, ManyBodyModel, SleepConfig};
 use factory_engine::mesh::{MassProperties, TriMesh};
 use factory_engine::rng::SplitMix64;
 use factory_engine::sdf::bake::BakeParams;
@@ -79,7 +79,7 @@ impl PileKind {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum PileSolver {
-    /// Near pairs found every frame, graph-coloured Gauss-Seidel (`factory_engine::crowd`).
+    /// Near pairs found every frame, graph-coloured Gauss-Seidel (`factory_engine::many_body`).
     Coloured,
     /// All pairs in a fixed list, one invocation per world (`GpuSolver`).
     Serial,
@@ -88,7 +88,7 @@ pub enum PileSolver {
 /// One pile world: the contact pairs, the bodies and their starting poses.
 pub struct PileScene {
     /// Every body with every body and with the ground, as templates (the near pairs are found per frame).
-    pub crowd: CrowdModel,
+    pub many_body: ManyBodyModel,
     pub bodies: BodyModel,
     /// Starting body poses of one world, shape [body_count].
     pub start: Vec<TransformGpu>,
@@ -142,7 +142,7 @@ pub fn pile_scene(kind: PileKind, bodies: u32, contact_offset: f32, mu: f32, see
         contact_offset,
         friction: mu,
     };
-    let crowd = CrowdModel::uniform(bodies, pair(0, 1, sdf), vec![pair(0, NO_BODY, SdfShape::Plane)]);
+    let many_body = ManyBodyModel::uniform(bodies, pair(0, 1, sdf), vec![pair(0, NO_BODY, SdfShape::Plane)]);
     let mut model = BodyModel { gravity: Vec3::new(0.0, 0.0, -9.81), ..Default::default() };
     for _ in 0..bodies {
         model.add_dynamic(part.mass, part.inertia, part.com);
@@ -166,19 +166,19 @@ pub fn pile_scene(kind: PileKind, bodies: u32, contact_offset: f32, mu: f32, see
             TransformGpu::new(com - q * part.com, q)
         })
         .collect();
-    Ok(PileScene { crowd, bodies: model, start, part, triangles: mesh.triangle_count() })
+    Ok(PileScene { many_body, bodies: model, start, part, triangles: mesh.triangle_count() })
 }
 
 impl PileScene {
     /// The fixed pair list of the serial solver: each body with the ground (pairs 0..n), then every pair
     /// of bodies (i, j), i < j.
     pub fn fixed_pairs(&self) -> ContactModel {
-        let n = self.crowd.body_count;
+        let n = self.many_body.body_count;
         let with = |a: u32, b: u32, t: &PairSpec| PairSpec { body_a: a, body_b: b, ..t.clone() };
-        let mut pairs: Vec<PairSpec> = (0..n).map(|i| with(i, NO_BODY, &self.crowd.templates[1])).collect();
+        let mut pairs: Vec<PairSpec> = (0..n).map(|i| with(i, NO_BODY, &self.many_body.templates[1])).collect();
         for i in 0..n {
             for j in i + 1..n {
-                pairs.push(with(i, j, &self.crowd.templates[0]));
+                pairs.push(with(i, j, &self.many_body.templates[0]));
             }
         }
         ContactModel { body_count: n, pairs }
@@ -209,7 +209,7 @@ pub struct PileRun {
     /// line per frame (index, speed, velocity, spin, centre of mass): what shows a nut orbiting between two
     /// poses for good (docs/BENCHMARKS.md). 0: none.
     pub trace_frames: u32,
-    /// Sleeping of bodies that stay put (coloured solver only; `factory_engine::crowd::SleepConfig`).
+    /// Sleeping of bodies that stay put (coloured solver only; `factory_engine::many_body::SleepConfig`).
     pub sleep: SleepConfig,
 }
 
@@ -297,7 +297,7 @@ pub struct PileReport {
     pub over_loop_budget: bool,
     /// ... in how many frames ...
     pub flagged_frames: u32,
-    /// ... and why (coloured solver: factory_engine::crowd::FLAG_* bits seen).
+    /// ... and why (coloured solver: factory_engine::many_body::FLAG_* bits seen).
     pub flags_seen: u32,
     /// Sleeping (0 frames: off): frames a body must stay within the distance [mm] and angle [rad] of one
     /// pose to fall asleep ...
@@ -423,7 +423,7 @@ impl Tally {
         }
     }
 
-    /// After a frame: its state, whether some world was flagged and not stepped (and why: crowd FLAG_*
+    /// After a frame: its state, whether some world was flagged and not stepped (and why: factory_engine::many_body FLAG_*
     /// bits), and the deepest contact it started from.
     fn after(&mut self, scene: &PileScene, s: BodyState, flagged: bool, flags: u32, deepest: Option<f32>) {
         self.depths.push(deepest.unwrap_or(f32::INFINITY));
@@ -492,7 +492,7 @@ pub const WAKE_FRAMES: u32 = 15;
 /// Whether the sleepers were resting where they slept: the last state uploaded again (which wakes every
 /// body and forgets the warm start), stepped [`WAKE_FRAMES`] frames; the farthest any centre of mass of
 /// world 0 moved: (body, distance [m]).
-fn woken_drift(gpu: &GpuContext, pipe: &CrowdPipeline, scene: &PileScene, n: usize) -> (usize, f32) {
+fn woken_drift(gpu: &GpuContext, pipe: &ManyBodyPipeline, scene: &PileScene, n: usize) -> (usize, f32) {
     let (end, _) = pipe.read_state(gpu);
     pipe.write_state(gpu, &end);
     for _ in 0..WAKE_FRAMES {
@@ -612,10 +612,11 @@ fn start_state(scene: &PileScene, run: &PileRun) -> BodyState {
     }
 }
 
-/// The coloured solver (`factory_engine::crowd`).
+/// The coloured solver (`factory_engine::many_body`).
 fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<PileReport> {
-    let cfg = CrowdConfig { sleep: run.sleep, ..CrowdConfig::for_bodies(run.bodies) };
-    let pipe = CrowdPipeline::new(gpu, &scene.crowd, &scene.bodies, run.worlds, &cfg, &run.contact, &run.solver)?;
+    let cfg = ManyBodyConfig { sleep: run.sleep, ..ManyBodyConfig::for_bodies(run.bodies) };
+    let pipe =
+        ManyBodyPipeline::new(gpu, &scene.many_body, &scene.bodies, run.worlds, &cfg, &run.contact, &run.solver)?;
     let state = start_state(scene, run);
     let mut t = Tally::new(scene, run, &state);
     // An untimed frame first: lavapipe compiles the shaders at their first dispatch.
@@ -670,7 +671,7 @@ fn run_coloured(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pi
         t.after(scene, s, flags != 0, flags, deepest);
     }
     let stats = pipe.read_stats(gpu);
-    let resting = |pipe: &CrowdPipeline| {
+    let resting = |pipe: &ManyBodyPipeline| {
         let (frame0, patches0) = &pipe.read_patches(gpu)[0];
         frame0
             .pairs
@@ -731,7 +732,7 @@ fn run_serial(gpu: &GpuContext, run: &PileRun, scene: &PileScene) -> Result<Pile
             .count() as u64,
         near_pairs: {
             let xf: Vec<_> = t.last.body_q.iter().map(|q| q.xf()).collect();
-            CrowdFlat::new(&scene.crowd, &run.contact)?.near_pairs(&xf, 0, u32::MAX).0.len() as u64
+            ManyBodyFlat::new(&scene.many_body, &run.contact)?.near_pairs(&xf, 0, u32::MAX).0.len() as u64
         },
         colours: 0,
         asleep_per_second: Vec::new(),

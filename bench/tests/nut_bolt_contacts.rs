@@ -3,7 +3,7 @@
 
 use factory_assets::{nut_bolt, Fit, IsoSize, NutBolt, ThreadOptions};
 use factory_bench::contact_scene::{lower_until_touch, min_depth, ContactScene, PartPair};
-use factory_engine::contact::generate::{triangle_candidate_cpu, Xf};
+use factory_engine::contact::generate::{triangle_candidate_cpu, RigidTransform};
 use factory_engine::contact::{ContactConfig, ContactPipeline};
 use factory_engine::gpu::GpuContext;
 use factory_engine::sdf::cache::SdfCache;
@@ -49,7 +49,7 @@ fn m16_reduction_from_over_10k_candidates_to_at_most_300_contacts() {
 
 /// Unreduced candidates of the nut (body 0) against the bolt SDF, from the CPU twin, in the bolt frame
 /// (= world: the bolt sits at the origin): (normal, depth, area of the triangle it stands for).
-fn unreduced(sc: &ContactScene, pipe: &ContactPipeline, nut: Xf) -> Vec<(Vec3, f32, f32)> {
+fn unreduced(sc: &ContactScene, pipe: &ContactPipeline, nut: RigidTransform) -> Vec<(Vec3, f32, f32)> {
     let pair = &pipe.flat.pairs[0];
     let tris = &sc.pair.a;
     (0..tris.triangle_count())

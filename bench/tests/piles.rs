@@ -10,8 +10,8 @@
 
 use factory_bench::pile::{run_pile, PileKind, PileReport, PileRun, PileSolver};
 use factory_engine::contact::ContactConfig;
-use factory_engine::crowd::SleepConfig;
 use factory_engine::gpu::GpuContext;
+use factory_engine::many_body::SleepConfig;
 use factory_engine::solver::SolverConfig;
 
 /// Simulated time [s]: the pile settles within ~4 s (last-second drift 1.5 mm at 3 s, 0.46 mm at 5 s).
@@ -37,7 +37,7 @@ fn a_pile_of_nuts_comes_to_rest_and_no_nut_outruns_free_fall() {
     pile_comes_to_rest(PileKind::Nuts, 8, PileSolver::Serial);
 }
 
-/// The coloured many-body solver (`factory_engine::crowd`: near pairs found every frame, graph-coloured
+/// The coloured many-body solver (`factory_engine::many_body`: near pairs found every frame, graph-coloured
 /// Gauss-Seidel) on the same pile as the serial solver above.
 #[test]
 fn a_coloured_pile_of_toruses_comes_to_rest_and_no_torus_outruns_free_fall() {
@@ -72,7 +72,7 @@ fn creeping_piles_of_16_nuts_come_to_rest_at_2_substeps_and_32_iterations() {
 }
 
 /// The same creeping piles at Table II's settings (1 substep, 16 + 1 iterations) with sleeping on
-/// (`factory_engine::crowd::SleepConfig`: a nut that stays within 1 mm and 0.1 rad of one pose for 30
+/// (`factory_engine::many_body::SleepConfig`: a nut that stays within 1 mm and 0.1 rad of one pose for 30
 /// frames sleeps until a moving body touches it). Besides the rest figures, which a sleeper meets by
 /// construction, the test asserts that the sleepers were resting where they slept: woken all at once after
 /// the run and stepped 0.25 s, no nut moves more than WOKEN_DRIFT_MM (one left unsupported would fall

@@ -296,7 +296,7 @@ pub fn parse_urdf(text: &str, path: &Path, base_dir: &Path) -> Result<UrdfModel>
         line: e.pos().row as usize,
         message: format!("malformed XML: {e}"),
     })?;
-    let cx = Cx { doc: &doc, path, base_dir };
+    let cx = ParseContext { doc: &doc, path, base_dir };
     let robot = doc.root_element();
     if robot.tag_name().name() != "robot" {
         return Err(cx.err(robot, format!("the root element is <{}>; a URDF's is <robot>", robot.tag_name().name())));
@@ -412,13 +412,13 @@ pub fn load_collision_mesh(c: &Collision) -> Result<TriMesh> {
 }
 
 /// Parsing context: the document (for line numbers), the file name and the mesh base directory.
-struct Cx<'d, 'i> {
+struct ParseContext<'d, 'i> {
     doc: &'d Document<'i>,
     path: &'d Path,
     base_dir: &'d Path,
 }
 
-impl<'d, 'i> Cx<'d, 'i> {
+impl<'d, 'i> ParseContext<'d, 'i> {
     fn line_at(&self, pos: usize) -> usize {
         self.doc.text_pos_at(pos).row as usize
     }

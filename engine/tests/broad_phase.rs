@@ -4,7 +4,7 @@
 //! pair may have a candidate within the offset (checked against a brute-force search of every triangle), and
 //! it must skip (else it buys nothing). The GPU pipeline gives a skipped pair no patches, as the CPU twin does.
 
-use factory_engine::contact::generate::{pair_far_cpu, shape_world, triangle_candidate_cpu, Xf};
+use factory_engine::contact::generate::{pair_far_cpu, shape_world, triangle_candidate_cpu, RigidTransform};
 use factory_engine::contact::model::FlatModel;
 use factory_engine::contact::roles::{pair_spec, ShapeDesc, ShapeGeometry};
 use factory_engine::contact::{
@@ -65,7 +65,7 @@ fn model(cache: &SdfCache) -> ContactModel {
 }
 
 /// The closest candidate of any query triangle of pair `p` [m] (brute force, every triangle).
-fn closest(flat: &FlatModel, p: usize, xf: &[Xf]) -> f32 {
+fn closest(flat: &FlatModel, p: usize, xf: &[RigidTransform]) -> f32 {
     let pair = &flat.pairs[p];
     let wa = shape_world(xf, 2, 0, pair.body_a, pair.a_pos, pair.a_rot);
     let wb = shape_world(xf, 2, 0, pair.body_b, pair.b_pos, pair.b_rot);
@@ -97,7 +97,7 @@ fn skipped_pairs_have_no_candidate_within_the_offset_and_far_pairs_are_skipped()
             TransformGpu::new(unit_vector(&mut rng) * 0.06 * rng.unit(), rotation(&mut rng)),
             TransformGpu::new(Vec3::ZERO, rotation(&mut rng)),
         ];
-        let xf: Vec<Xf> = body_q.iter().map(|t| t.xf()).collect();
+        let xf: Vec<RigidTransform> = body_q.iter().map(|t| t.xf()).collect();
         for p in 0..PAIRS.len() {
             let pair = &flat.pairs[p];
             let wa = shape_world(&xf, 2, 0, pair.body_a, pair.a_pos, pair.a_rot);

@@ -3,15 +3,15 @@
 //! declares it: the same size and every member at the same offset ([`factory_engine::gpu::layout`]). No GPU
 //! needed.
 //!
-//! Not here: crowd::gpu's `PassParamsGpu` (`PassParams`), private to its module, so no test outside it can
+//! Not here: many_body::gpu's `PassParamsGpu` (`PassParams`), private to its module, so no test outside it can
 //! take its field offsets.
 
 use factory_engine::articulation::gpu::{ArticulationParamsGpu, DofGpu, LinkGpu};
 use factory_engine::contact::model::{JobGpu, PairGpu, ParamsGpu, PatchGpu};
 use factory_engine::contact::TransformGpu;
-use factory_engine::crowd::gpu::CrowdParamsGpu;
 use factory_engine::gpu::layout::assert_mirror;
 use factory_engine::gpu_mirror;
+use factory_engine::many_body::gpu::ManyBodyParamsGpu;
 use factory_engine::solver::articulated::CouplingGpu;
 use factory_engine::solver::gpu::{BodyGpu, SolverParamsGpu};
 
@@ -20,7 +20,7 @@ const CONTACT_GENERATE: &str = include_str!("../src/contact/generate.wgsl");
 const SOLVER_CORE: &str = include_str!("../src/solver/solver_core.wgsl");
 const ARTICULATED: &str = include_str!("../src/solver/articulated.wgsl");
 const ARTICULATION_CORE: &str = include_str!("../src/articulation/articulation_core.wgsl");
-const CROWD_COMMON: &str = include_str!("../src/crowd/crowd_common.wgsl");
+const MANY_BODY_COMMON: &str = include_str!("../src/many_body/many_body_common.wgsl");
 
 /// The contact pipeline's uniform and storage elements (common.wgsl, generate.wgsl).
 #[test]
@@ -62,7 +62,7 @@ fn contact_mirrors_match_their_wgsl_structs() {
             area_unit,
             min_separation,
             friction,
-            crowd_template,
+            many_body_template,
             a_bound,
             b_bound,
         }),
@@ -158,13 +158,13 @@ fn articulation_mirrors_match_their_wgsl_structs() {
     );
 }
 
-/// The crowd kernels' shared uniform (crowd_common.wgsl).
+/// The many-body kernels' shared uniform (many_body_common.wgsl).
 #[test]
-fn crowd_mirrors_match_their_wgsl_structs() {
+fn many_body_mirrors_match_their_wgsl_structs() {
     assert_mirror(
-        CROWD_COMMON,
-        "CrowdParams",
-        &gpu_mirror!(CrowdParamsGpu {
+        MANY_BODY_COMMON,
+        "ManyBodyParams",
+        &gpu_mirror!(ManyBodyParamsGpu {
             world_count,
             body_count,
             cap,

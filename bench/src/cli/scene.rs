@@ -10,8 +10,8 @@ use crate::scene::{run_nut_bolt, NutBoltReport, NutBoltRun, SolverColumns};
 use anyhow::{anyhow, bail, Result};
 use clap::ValueEnum;
 use factory_engine::contact::ContactConfig;
-use factory_engine::crowd::SleepConfig;
 use factory_engine::gpu::GpuContext;
+use factory_engine::many_body::SleepConfig;
 use factory_engine::solver::SolverConfig;
 
 /// The scenes `scene` runs (and `pareto --scene` names).

@@ -87,8 +87,8 @@ struct Pair {
     area_unit: f32,
     min_separation: f32,
     friction: f32,
-    // A crowd pair's template (crowd/near.wgsl); unused elsewhere.
-    crowd_template: u32,
+    // A many_body pair's template (many_body/near.wgsl); unused elsewhere.
+    many_body_template: u32,
     _pad2: f32,
     _pad3: f32,
     // Bounding spheres: the query shape's in its frame, the SDF shape's in its frame (w < 0: unbounded).

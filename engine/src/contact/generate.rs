@@ -244,19 +244,19 @@ fn quat_mul(a: Vec4, b: Vec4) -> Vec4 {
 
 /// A rigid transform as the kernels store it: position and quaternion (x, y, z, w).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Xf {
+pub struct RigidTransform {
     pub p: Vec3,
     pub q: Vec4,
 }
 
-impl Xf {
-    pub const IDENTITY: Xf = Xf { p: Vec3::ZERO, q: Vec4::new(0.0, 0.0, 0.0, 1.0) };
-    pub fn mul(&self, b: &Xf) -> Xf {
-        Xf { p: self.p + quat_rotate(self.q, b.p), q: quat_mul(self.q, b.q) }
+impl RigidTransform {
+    pub const IDENTITY: RigidTransform = RigidTransform { p: Vec3::ZERO, q: Vec4::new(0.0, 0.0, 0.0, 1.0) };
+    pub fn mul(&self, b: &RigidTransform) -> RigidTransform {
+        RigidTransform { p: self.p + quat_rotate(self.q, b.p), q: quat_mul(self.q, b.q) }
     }
-    pub fn inv(&self) -> Xf {
+    pub fn inv(&self) -> RigidTransform {
         let qi = Vec4::new(-self.q.x, -self.q.y, -self.q.z, self.q.w);
-        Xf { p: -quat_rotate(qi, self.p), q: qi }
+        RigidTransform { p: -quat_rotate(qi, self.p), q: qi }
     }
     pub fn point(&self, v: Vec3) -> Vec3 {
         self.p + quat_rotate(self.q, v)
@@ -264,8 +264,8 @@ impl Xf {
     pub fn rotate(&self, v: Vec3) -> Vec3 {
         quat_rotate(self.q, v)
     }
-    fn from_arrays(p: [f32; 4], q: [f32; 4]) -> Xf {
-        Xf { p: Vec3::new(p[0], p[1], p[2]), q: Vec4::from_array(q) }
+    fn from_arrays(p: [f32; 4], q: [f32; 4]) -> RigidTransform {
+        RigidTransform { p: Vec3::new(p[0], p[1], p[2]), q: Vec4::from_array(q) }
     }
 }
 
@@ -390,16 +390,26 @@ pub struct JobOutput {
 }
 
 /// Pose of a shape in the world: body pose (or identity for NO_BODY) times the shape's local pose.
-pub fn shape_world(body_q: &[Xf], body_count: u32, world: u32, body: u32, pos: [f32; 4], rot: [f32; 4]) -> Xf {
-    let body_pose =
-        if body == super::model::NO_BODY { Xf::IDENTITY } else { body_q[(world * body_count + body) as usize] };
-    body_pose.mul(&Xf::from_arrays(pos, rot))
+pub fn shape_world(
+    body_q: &[RigidTransform],
+    body_count: u32,
+    world: u32,
+    body: u32,
+    pos: [f32; 4],
+    rot: [f32; 4],
+) -> RigidTransform {
+    let body_pose = if body == super::model::NO_BODY {
+        RigidTransform::IDENTITY
+    } else {
+        body_q[(world * body_count + body) as usize]
+    };
+    body_pose.mul(&RigidTransform::from_arrays(pos, rot))
 }
 
 /// The broad phase (common.wgsl's `pair_far`): whether no query triangle can have a candidate: the query
 /// shape's bounding sphere lies farther than the contact offset above a plane, or the pair's bounding
 /// spheres, the shapes posed at `world_a` and `world_b`, are farther apart than the offset.
-pub fn pair_far_cpu(pair: &PairGpu, world_a: &Xf, world_b: &Xf) -> bool {
+pub fn pair_far_cpu(pair: &PairGpu, world_a: &RigidTransform, world_b: &RigidTransform) -> bool {
     if pair.sdf_kind == 1 {
         let c = world_b.inv().point(world_a.point(Vec3::from_slice(&pair.a_bound[..3])));
         return c.z - pair.a_bound[3] > pair.contact_offset;
@@ -418,7 +428,7 @@ pub fn pair_far_cpu(pair: &PairGpu, world_a: &Xf, world_b: &Xf) -> bool {
 pub fn generate_job_cpu(
     flat: &FlatModel,
     job: &JobGpu,
-    body_q: &[Xf],
+    body_q: &[RigidTransform],
     body_count: u32,
     world: u32,
     cfg: &ContactConfig,

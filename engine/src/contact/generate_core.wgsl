@@ -1,5 +1,5 @@
 // The work of one contact-generation job, shared by generate.wgsl (a static job list) and
-// crowd/generate.wgsl (the broad phase's list of near pairs): see generate.wgsl's header for the method.
+// many_body/generate.wgsl (the broad phase's list of near pairs): see generate.wgsl's header for the method.
 
 struct Candidate {
     x: vec3<f32>,
@@ -102,7 +102,7 @@ fn minimise_on_triangle(
 // shape A posed at world_a against the SDF of shape B posed at world_b, reduced in workgroup memory; the
 // job's patches are written, in world coordinates, to job_patches[out_base..]. Returns (patches,
 // candidates). Called in uniform control flow (it holds the reduction's barriers), after sdf_bind(pair). The
-// caller declares params, tri_verts and job_patches (generate.wgsl; crowd/contacts.wgsl).
+// caller declares params, tri_verts and job_patches (generate.wgsl; many_body/contacts.wgsl).
 //
 // `evicting` false (a constant: see reduce_batch): the job stops where its patch budget would overflow and
 // returns (NONE, 0) without writing anything, for a pass with `evicting` to redo.
@@ -192,7 +192,7 @@ fn generate_job(lid: u32, pair: Pair, tri_first: u32, tri_count: u32, world_a: T
 // faster (docs/BENCHMARKS.md). With grid
 // SDFs lavapipe reads every voxel lane by lane anyway, and a culled triangle in one batch slot would cost
 // the other three their skip, so the piles keep the one-triangle path.
-// INTERLEAVED_DESCENT: ContactConfig::interleaved_descent (set by generate.rs; the crowd kernels, whose SDFs
+// INTERLEAVED_DESCENT: ContactConfig::interleaved_descent (set by generate.rs; the many-body kernels, whose SDFs
 // are grids, keep the default).
 override INTERLEAVED_DESCENT: bool = true;
 override VEC4_DESCENT: bool = INTERLEAVED_DESCENT && HAS_THREAD && !HAS_GRID && !HAS_REVOLVED && PER == 4u;

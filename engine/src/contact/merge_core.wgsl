@@ -1,5 +1,5 @@
 // Second level of contact reduction for one pair (the body of a merge workgroup), shared by merge.wgsl and
-// crowd/merge.wgsl: reads the patches of the pair's `job_count` jobs at job_patches[(job_base + j) *
+// many_body/merge.wgsl: reads the patches of the pair's `job_count` jobs at job_patches[(job_base + j) *
 // MAX_PATCHES..] (counts at job_patch_count[job_base + j]) and writes at most MAX_PATCHES patches to
 // patches[out_base..]; returns their number. Called in uniform control flow (the reduction's barriers).
 

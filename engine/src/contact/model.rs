@@ -129,8 +129,8 @@ pub struct PairGpu {
     pub min_separation: f32,
     /// Coulomb friction coefficient (unitless).
     pub friction: f32,
-    /// A crowd pair's template index (crate::crowd); 0 elsewhere.
-    pub crowd_template: u32,
+    /// A many-body pair's template index (crate::many_body); 0 elsewhere.
+    pub many_body_template: u32,
     pub _pad: [f32; 2],
     /// Bounding sphere of the query shape (its triangles plus `radius`): centre in the query shape's frame
     /// xyz [m], radius w [m].
@@ -513,7 +513,7 @@ impl ContactModel {
                 // Contacts of one patch closer than a tenth of a typical edge add nothing.
                 min_separation: 0.1 * mean_edge,
                 friction: p.friction,
-                crowd_template: 0,
+                many_body_template: 0,
                 _pad: [0.0; 2],
                 a_bound: bounding_sphere(p.query.triangles.iter().flatten().copied(), p.query.radius),
                 b_bound: f.sdf_bound(p),

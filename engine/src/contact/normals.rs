@@ -1,6 +1,6 @@
 //! Per-contact normal kernel (normals.wgsl) and its CPU twin [`contact_normal_cpu`].
 
-use super::generate::{compute_pipeline, sdf_sample_cpu, shader_source, shape_world, Xf};
+use super::generate::{compute_pipeline, sdf_sample_cpu, shader_source, shape_world, RigidTransform};
 use super::model::{FlatModel, PatchGpu};
 use super::ContactConfig;
 use glam::Vec3;
@@ -55,7 +55,7 @@ pub fn contact_normal_cpu(
     pair_index: usize,
     p: &PatchGpu,
     slot: usize,
-    body_q: &[Xf],
+    body_q: &[RigidTransform],
     body_count: u32,
     world: u32,
 ) -> Vec3 {

@@ -2,7 +2,7 @@
 //! then merge where a pair has several jobs), results left on the device for the solver; per-contact normals
 //! are computed when the host reads the contacts back. [`ContactPipeline::contacts_cpu`] runs the CPU twin.
 
-use super::generate::{generate_job_cpu, params, GenerateKernel, Xf};
+use super::generate::{generate_job_cpu, params, GenerateKernel, RigidTransform};
 use super::merge::{merge_cpu, MergeKernel};
 use super::model::{auto_chunk, ContactModel, FlatModel, ParamsGpu, PatchGpu};
 use super::normals::{contact_normal_cpu, NormalsKernel};
@@ -23,8 +23,8 @@ impl TransformGpu {
     pub fn new(p: Vec3, q: Quat) -> Self {
         TransformGpu { p: [p.x, p.y, p.z, 0.0], q: [q.x, q.y, q.z, q.w] }
     }
-    pub fn xf(&self) -> Xf {
-        Xf { p: Vec3::new(self.p[0], self.p[1], self.p[2]), q: Vec4::from_array(self.q) }
+    pub fn xf(&self) -> RigidTransform {
+        RigidTransform { p: Vec3::new(self.p[0], self.p[1], self.p[2]), q: Vec4::from_array(self.q) }
     }
 }
 
@@ -482,7 +482,7 @@ pub fn contacts_cpu(
     merges: bool,
 ) -> ContactsHost {
     use rayon::prelude::*;
-    let xf: Vec<Xf> = body_q.iter().map(|t| t.xf()).collect();
+    let xf: Vec<RigidTransform> = body_q.iter().map(|t| t.xf()).collect();
     let pair_count = flat.pairs.len();
     let results: Vec<(Vec<Patch>, u32)> = (0..world_count as usize * pair_count)
         .into_par_iter()

@@ -5,7 +5,7 @@
 //! Algorithm: the host's, step for step (module docs of [`super`] and
 //! [`crate::articulation::dynamics::ContactResponse`]); parity is a matter of float rounding. Two forms
 //! differ: the CPU keeps each row's impulse directions with their effective masses and the twist change
-//! they make on every body (`LinkDir`), computed once per sample; the kernel recomputes them from the K
+//! they make on every body (`RowDirection`), computed once per sample; the kernel recomputes them from the K
 //! blocks at every update, for rows with one link side (a pair of two link bodies is refused: the
 //! pads of one hand never touch, and the kernel stays small enough for lavapipe to compile; written out
 //! for both sides at once its LLVM compile runs past 10 minutes). On a GPU that is arithmetic on values in

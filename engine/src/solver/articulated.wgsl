@@ -258,7 +258,7 @@ fn slot_response(s: u32, u: Sv) -> Sv {
 }
 
 // Fills dir_w for direction d (not necessarily unit) and returns the link side's part of the inverse
-// effective mass along d, u . K_{ls, ls} u with u its spatial impulse (solver/rows.rs Step::eff).
+// effective mass along d, u . K_{ls, ls} u with u its spatial impulse (solver/rows.rs SubstepInputs::eff).
 fn link_response(l: LinkCtx, ra: vec3<f32>, rb: vec3<f32>, d: vec3<f32>) -> f32 {
     let u = Sv(l.sign * d, l.sign * cross(link_lever(l, ra, rb), d));
     var own = 0.0;

@@ -4,8 +4,8 @@
 //! [`super`]), with the articulation's joints moved by the impulses its link bodies took.
 
 use super::model::{xf, BodyModel, BodyState, Control, SolverConfig};
-use super::rows::{Row, Step, Vels};
-use super::sweep::{solve_rows, Idle};
+use super::rows::{Row, StepVelocities, SubstepInputs};
+use super::sweep::{solve_rows, RowIdleTest};
 use super::warm_start::{take_over, WarmStart, WARM_DISTANCE};
 use crate::articulation::{dynamics, ArticulationControl, ArticulationModel, ArticulationState};
 use crate::contact::model::{FlatModel, NO_BODY};
@@ -115,7 +115,7 @@ pub fn step_cpu_articulated_with(
     };
     // Worlds are independent: stepped in parallel, each exactly as alone (results do not depend on the
     // thread count).
-    let outs: Vec<WorldOut> = (0..world_count).into_par_iter().map(|w| step_world(&inputs, w)).collect();
+    let outs: Vec<WorldStepOutput> = (0..world_count).into_par_iter().map(|w| step_world(&inputs, w)).collect();
     let mut ok = Vec::with_capacity(world_count);
     for (w, out) in outs.into_iter().enumerate() {
         warm.rows[w] = out.rows;
@@ -157,14 +157,15 @@ struct FrameInputs<'a> {
 type WorldJoints = (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>);
 
 /// One frame of world `w`: its rows, then the substeps.
-fn step_world(f: &FrameInputs, w: usize) -> WorldOut {
+fn step_world(f: &FrameInputs, w: usize) -> WorldStepOutput {
     let (model, cfg, h, nb) = (f.model, f.cfg, f.h, f.model.body_count());
     let (link_bodies, links) = (f.link_bodies, f.links);
     let base = w * nb;
     // Index nb stands for the static world (infinite mass, identity pose).
     let mut pos: Vec<(Vec3, Quat)> = (0..nb).map(|i| xf(&f.state.body_q[base + i])).collect();
     pos.push((Vec3::ZERO, Quat::IDENTITY));
-    let mut vel = Vels { v: f.state.body_qd[base..base + nb].to_vec(), phi: vec![[Vec3::ZERO; 2]; links.len()] };
+    let mut vel =
+        StepVelocities { v: f.state.body_qd[base..base + nb].to_vec(), phi: vec![[Vec3::ZERO; 2]; links.len()] };
     vel.v.push([Vec3::ZERO; 2]);
     // This world's joints, and the link poses they give (used for the frame's rows: the caller keeps
     // the link bodies' poses in the state at the joints' forward kinematics).
@@ -182,12 +183,12 @@ fn step_world(f: &FrameInputs, w: usize) -> WorldOut {
             pos[i] = lp[links[s] as usize];
         }
     }
-    let mut ctx = Step { flat: f.flat, model, cfg, h, links: None, slot: f.slot, link_bodies };
+    let mut ctx = SubstepInputs { flat: f.flat, model, cfg, h, links: None, slot: f.slot, link_bodies };
     let mut rows = frame_rows(f, w, &pos);
     // Each link patch's Delassus matrix for the substep's sweeps (solve_rows).
     let mut blocks = (f.sweep == PatchSweep::Block).then(Vec::new);
     // Each row's normal test for the sweeps (solve_rows), rebuilt with the rows' caches.
-    let mut idle = vec![Idle::default(); rows.len()];
+    let mut idle = vec![RowIdleTest::default(); rows.len()];
     for _ in 0..cfg.substeps {
         // The articulation's velocity before contact, and how its links answer impulses this substep.
         if let (Some((am, _, _)), Some((q, qd, tau, target)), Some(lp)) = (f.art, joints.as_mut(), link_pose.as_mut()) {
@@ -286,7 +287,13 @@ fn frame_rows(f: &FrameInputs, w: usize, pos: &[(Vec3, Quat)]) -> Vec<Row> {
 
 /// A substep's gravity and external wrenches on the velocities of the bodies with mass (`ctx.h` long;
 /// `base`: the world's first body in `control`).
-fn integrate_velocities(ctx: &Step, control: &Control, base: usize, pos: &[(Vec3, Quat)], vel: &mut Vels) {
+fn integrate_velocities(
+    ctx: &SubstepInputs,
+    control: &Control,
+    base: usize,
+    pos: &[(Vec3, Quat)],
+    vel: &mut StepVelocities,
+) {
     let (model, h) = (ctx.model, ctx.h);
     for (i, v) in vel.v.iter_mut().enumerate().take(model.body_count()) {
         if ctx.inv_m(i) > 0.0 {
@@ -302,7 +309,7 @@ fn integrate_velocities(ctx: &Step, control: &Control, base: usize, pos: &[(Vec3
 
 /// A substep's motion of the bodies with mass and the kinematic ones at their velocities (link bodies
 /// follow their joints instead).
-fn integrate_positions(ctx: &Step, pos: &mut [(Vec3, Quat)], vel: &Vels) {
+fn integrate_positions(ctx: &SubstepInputs, pos: &mut [(Vec3, Quat)], vel: &StepVelocities) {
     let (model, h) = (ctx.model, ctx.h);
     for (i, pose) in pos.iter_mut().enumerate().take(model.body_count()) {
         if (ctx.inv_m(i) > 0.0 || model.is_kinematic(i)) && ctx.slot[i].is_none() {
@@ -324,9 +331,9 @@ fn finish_world(
     nb: usize,
     rows: Vec<Row>,
     pos: Vec<(Vec3, Quat)>,
-    mut vel: Vels,
+    mut vel: StepVelocities,
     joints: Option<WorldJoints>,
-) -> WorldOut {
+) -> WorldStepOutput {
     let mut ok = true;
     let mut body_q = Vec::with_capacity(nb);
     for (i, &(p, q)) in pos.iter().enumerate().take(nb) {
@@ -343,12 +350,12 @@ fn finish_world(
         }
         (q, qd)
     });
-    WorldOut { rows, body_q, body_qd: vel.v, joints, ok }
+    WorldStepOutput { rows, body_q, body_qd: vel.v, joints, ok }
 }
 
 /// What one world's step hands back: its rows (next frame's warm start), bodies, joints and whether it
 /// stayed finite and within the speed bound.
-struct WorldOut {
+struct WorldStepOutput {
     rows: Vec<Row>,
     body_q: Vec<TransformGpu>,
     body_qd: Vec<[Vec3; 2]>,

@@ -1,7 +1,7 @@
 //! The contact rows of a CPU step and what updating one reads: a row is one reduced contact anchored in
 //! its query body, with its impulses and, per substep, a cache of its lever arms, tangents and effective
-//! masses ([`RowCache`]); [`Step`] holds the bodies, settings and articulation response a row's update
-//! reads, [`Vels`] the velocities it changes.
+//! masses ([`RowCache`]); [`SubstepInputs`] holds the bodies, settings and articulation response a row's update
+//! reads, [`StepVelocities`] the velocities it changes.
 
 use super::model::{BodyModel, SolverConfig};
 use crate::articulation::dynamics;
@@ -39,22 +39,22 @@ pub(super) struct Row {
 /// What a row's sweeps reuse between samples ([`Row::cache`]).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct RowCache {
-    pub(super) lever: Lever,
+    pub(super) lever: LeverArms,
     pub(super) tangents: [Vec3; 2],
     /// Inverse effective mass along the normal, tangent 1 and tangent 2 [1/kg].
     pub(super) k: [f32; 3],
     /// In an articulated substep: what a unit impulse along the normal, tangent 1 and tangent 2 does to
     /// every body it moves, and the angular parts of the velocity Jacobians (None: no articulation, or
-    /// more link bodies than [`LINK_DIR_BODIES`] holds; those go through [`Step::apply`], as solver.wgsl).
-    pub(super) link: Option<[LinkDir; 3]>,
+    /// more link bodies than [`LINK_DIR_BODIES`] holds; those go through [`SubstepInputs::apply`], as solver.wgsl).
+    pub(super) link: Option<[RowDirection; 3]>,
 }
 
-/// The most bodies one [`LinkDir`] moves: the row's two rigid sides and the articulation's link bodies.
+/// The most bodies one [`RowDirection`] moves: the row's two rigid sides and the articulation's link bodies.
 pub(super) const LINK_DIR_BODIES: usize = 4;
 
 /// The velocity change a unit impulse along one direction of a row on an articulation link makes: the
 /// row's rigid bodies through their mass and inertia, and every link body through the substep's K blocks
-/// (an impulse on one finger moves the arm, so the other finger too). [`Step::apply`] computes the same
+/// (an impulse on one finger moves the arm, so the other finger too). [`SubstepInputs::apply`] computes the same
 /// per impulse from the K blocks (a 6 x 6 product per link body and side); the finger pads' rows are swept
 /// `link_patch_iters` times per sweep, and that product is about half of an articulated step when
 /// recomputed per impulse. In an articulated step the rows between rigid bodies (the nut on the thread)
@@ -62,7 +62,7 @@ pub(super) const LINK_DIR_BODIES: usize = 4;
 /// quarter faster than recomputing lever products and dividing per impulse (docs/BENCHMARKS.md).
 /// Rigid-only steps keep the lever form, which solver.wgsl mirrors.
 #[derive(Clone, Copy, Debug, Default)]
-pub(super) struct LinkDir {
+pub(super) struct RowDirection {
     /// The direction d (world frame) and its angular Jacobians on a and b: ra x d and rb x d [m], so the
     /// relative velocity along d is (va - vb) . d + wa . (ra x d) - wb . (rb x d) (two dot products per
     /// side where the lever form takes a cross product more).
@@ -79,16 +79,16 @@ pub(super) struct LinkDir {
     pub(super) phi_len: u8,
 }
 
-impl LinkDir {
+impl RowDirection {
     /// The relative velocity of row sides `a` and `b` along the direction [m/s].
     #[inline]
-    pub(super) fn rel(&self, vel: &Vels, a: usize, b: usize) -> f32 {
+    pub(super) fn rel(&self, vel: &StepVelocities, a: usize, b: usize) -> f32 {
         dir_rel(self.d, &self.jac, vel, a, b)
     }
 
     /// Applies `x` [N s] along the direction: the bodies' twists and the slots' spatial impulses.
     #[inline]
-    pub(super) fn apply(&self, vel: &mut Vels, x: f32) {
+    pub(super) fn apply(&self, vel: &mut StepVelocities, x: f32) {
         for (body, dv) in &self.moved[..self.moved_len as usize] {
             let v = &mut vel.v[*body as usize];
             v[0] += dv[0] * x;
@@ -103,16 +103,16 @@ impl LinkDir {
 }
 
 /// The relative velocity of row sides `a` and `b` along direction `d` with angular Jacobians `jac` [m/s]
-/// ([`LinkDir::rel`], and [`Idle`]'s copy of the normal's, so that both test alike bitwise).
+/// ([`RowDirection::rel`], and [`RowIdleTest`]'s copy of the normal's, so that both test alike bitwise).
 #[inline]
-pub(super) fn dir_rel(d: Vec3, jac: &[Vec3; 2], vel: &Vels, a: usize, b: usize) -> f32 {
+pub(super) fn dir_rel(d: Vec3, jac: &[Vec3; 2], vel: &StepVelocities, a: usize, b: usize) -> f32 {
     let (va, vb) = (&vel.v[a], &vel.v[b]);
     (va[0] - vb[0]).dot(d) + va[1].dot(jac[0]) - vb[1].dot(jac[1])
 }
 
 /// What every row of one world's step reads: the contact model, the bodies, the settings and the substep.
 /// Body index `model.body_count()` is the static world (infinite mass, identity pose).
-pub(super) struct Step<'a> {
+pub(super) struct SubstepInputs<'a> {
     pub(super) flat: &'a FlatModel,
     pub(super) model: &'a BodyModel,
     pub(super) cfg: &'a SolverConfig,
@@ -129,12 +129,12 @@ pub(super) struct Step<'a> {
 /// The bodies' velocities during a step (twist of the centre of mass: linear [m/s], angular [rad/s];
 /// index body_count is the static world), and the spatial impulses (force [N s], torque about the centre
 /// of mass [N m s]) applied to each articulation slot since its joints last took them.
-pub(super) struct Vels {
+pub(super) struct StepVelocities {
     pub(super) v: Vec<[Vec3; 2]>,
     pub(super) phi: Vec<[Vec3; 2]>,
 }
 
-impl Step<'_> {
+impl SubstepInputs<'_> {
     pub(super) fn inv_m(&self, i: usize) -> f32 {
         self.model.body_inv_mass.get(i).copied().unwrap_or(0.0)
     }
@@ -154,11 +154,11 @@ impl Step<'_> {
     }
 
     /// The row's lever arms and the bodies' world inverse inertias, for contact normal `n`.
-    pub(super) fn lever(&self, r: &Row, pos: &[(Vec3, Quat)], n: Vec3) -> Lever {
+    pub(super) fn lever(&self, r: &Row, pos: &[(Vec3, Quat)], n: Vec3) -> LeverArms {
         let ((pa, qa), (pb, qb)) = (pos[r.a], pos[r.b]);
         // The contact point on a's surface.
         let xa = pa + qa * r.anchor_a - self.flat.pairs[r.pair].radius * n;
-        Lever {
+        LeverArms {
             ra: xa - (pa + qa * self.com(r.a)),
             rb: xa - (pb + qb * self.com(r.b)),
             ia: self.inv_i_world(r.a, qa),
@@ -168,14 +168,14 @@ impl Step<'_> {
 
     /// The spatial impulses (force, torque about the centre of mass) a unit `d` at the row's point puts on
     /// its bodies that are articulation links: (slot, impulse) for a, then b (which takes the opposite).
-    fn link_impulses(&self, r: &Row, l: &Lever, d: Vec3) -> [Option<(usize, [Vec3; 2])>; 2] {
+    fn link_impulses(&self, r: &Row, l: &LeverArms, d: Vec3) -> [Option<(usize, [Vec3; 2])>; 2] {
         [self.slot[r.a].map(|s| (s, [d, l.ra.cross(d)])), self.slot[r.b].map(|s| (s, [-d, -l.rb.cross(d)]))]
     }
 
     /// Inverse effective mass of the row along unit `d` [1/kg]: rigid bodies through their mass and
     /// inertia, articulation links through the substep's K blocks (cross terms included when both sides are
     /// links of the articulation).
-    pub(super) fn eff(&self, r: &Row, l: &Lever, d: Vec3) -> f32 {
+    pub(super) fn eff(&self, r: &Row, l: &LeverArms, d: Vec3) -> f32 {
         let (ca, cb) = (l.ra.cross(d), l.rb.cross(d));
         // Zero for link bodies: their inverse mass and inertia are zero in the body model.
         let mut k = self.inv_m(r.a) + self.inv_m(r.b) + ca.dot(l.ia * ca) + cb.dot(l.ib * cb);
@@ -191,18 +191,18 @@ impl Step<'_> {
         k
     }
 
-    /// The [`LinkDir`] of a row along unit `d` in an articulated substep, for rows between rigid bodies
-    /// too (their impulses then skip [`Step::apply`]'s per-impulse inertia products); None without an
+    /// The [`RowDirection`] of a row along unit `d` in an articulated substep, for rows between rigid bodies
+    /// too (their impulses then skip [`SubstepInputs::apply`]'s per-impulse inertia products); None without an
     /// articulation response, or when the row touches a link and the articulation has more link bodies
-    /// than a [`LinkDir`] holds.
-    pub(super) fn link_dir(&self, r: &Row, l: &Lever, d: Vec3) -> Option<LinkDir> {
+    /// than a [`RowDirection`] holds.
+    pub(super) fn link_dir(&self, r: &Row, l: &LeverArms, d: Vec3) -> Option<RowDirection> {
         let resp = self.links.as_ref()?;
         let sides = self.link_impulses(r, l, d);
         let on_link = sides.iter().any(Option::is_some);
         if on_link && self.link_bodies.len() + 2 > LINK_DIR_BODIES {
             return None;
         }
-        let mut out = LinkDir { d, jac: [l.ra.cross(d), l.rb.cross(d)], ..LinkDir::default() };
+        let mut out = RowDirection { d, jac: [l.ra.cross(d), l.rb.cross(d)], ..RowDirection::default() };
         let mut push = |body: usize, dv: [Vec3; 2]| {
             out.moved[out.moved_len as usize] = (body as u32, dv);
             out.moved_len += 1;
@@ -232,7 +232,7 @@ impl Step<'_> {
     }
 
     /// Applies impulse `imp` [N s] to a and its opposite to b.
-    pub(super) fn apply(&self, r: &Row, l: &Lever, vel: &mut Vels, imp: Vec3) {
+    pub(super) fn apply(&self, r: &Row, l: &LeverArms, vel: &mut StepVelocities, imp: Vec3) {
         vel.v[r.a][0] += self.inv_m(r.a) * imp;
         vel.v[r.a][1] += l.ia * l.ra.cross(imp);
         vel.v[r.b][0] -= self.inv_m(r.b) * imp;
@@ -255,7 +255,7 @@ impl Step<'_> {
 /// Lever arms from each body's centre of mass to a row's contact point [m] and the bodies' world-frame
 /// inverse inertias [1/(kg m^2)] (zero for static and kinematic bodies).
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Lever {
+pub(super) struct LeverArms {
     pub(super) ra: Vec3,
     pub(super) rb: Vec3,
     pub(super) ia: Mat3,

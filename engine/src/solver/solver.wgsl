@@ -5,7 +5,7 @@
 // the position sweeps and once for the velocity sweeps).
 //
 // On a GPU one invocation per world keeps a warp busy with 32 worlds: fine for the thousands of worlds of
-// RL training, poor for one world with many contacts: that is crowd/solve.wgsl (graph-coloured pairs).
+// RL training, poor for one world with many contacts: that is many_body/solve.wgsl (graph-coloured pairs).
 
 @group(0) @binding(0) var<uniform> sp: SolverParams;
 @group(0) @binding(1) var<storage, read> pairs: array<Pair>;
@@ -18,7 +18,7 @@
 // Laid out as control_index and rows_base say: status per world, wrenches per body, ROW * max_rows per world.
 @group(2) @binding(2) var<storage, read_write> solver_scratch: array<vec4<f32>>;
 
-// Whether global body g takes part in the dynamics (crowd/solve.wgsl: not asleep); every body here does.
+// Whether global body g takes part in the dynamics (many_body/solve.wgsl: not asleep); every body here does.
 fn body_awake(g: u32) -> bool {
     return true;
 }

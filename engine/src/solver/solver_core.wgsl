@@ -1,6 +1,6 @@
 // The rigid-body solver's row and body operations (see solver/mod.rs for the scheme), shared by the
 // one-invocation-per-world step (solver.wgsl) and the graph-coloured step of many-body worlds
-// (crowd/solve.wgsl). Each of those declares the bindings used here: sp, pairs, sdf_values, bodies, body_q,
+// (many_body/solve.wgsl). Each of those declares the bindings used here: sp, pairs, sdf_values, bodies, body_q,
 // body_qd and solver_scratch (laid out as control_index and rows_base say).
 
 struct SolverParams {
@@ -123,7 +123,7 @@ fn dyn_of(world: u32, b: u32) -> Dyn {
         return Dyn(NONE, 0.0, mat3x3<f32>());
     }
     let g = world * sp.body_count + b;
-    // A sleeping body (crowd/solve.wgsl) responds as a static one.
+    // A sleeping body (many_body/solve.wgsl) responds as a static one.
     let inv_mass = select(0.0, bodies[b].com_inv_mass.w, body_awake(g));
     var inv_i = mat3x3<f32>();
     if (inv_mass > 0.0) {

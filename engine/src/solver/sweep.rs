@@ -3,26 +3,26 @@
 //! row by row ([`solve_row`], the twin of solver.wgsl's `solve_row`) or, for an articulated patch's
 //! passes after its first, on the patch's own Delassus matrix ([`solve_patch_block`]).
 
-use super::rows::{dir_rel, LinkDir, Row, RowCache, Step, Vels};
-use crate::contact::generate::{sdf_sample_cpu, Xf};
+use super::rows::{dir_rel, Row, RowCache, RowDirection, StepVelocities, SubstepInputs};
+use crate::contact::generate::{sdf_sample_cpu, RigidTransform};
 use glam::{Quat, Vec3, Vec4};
 
 /// One sweep over the rows, in (pair, patch, slot) order: each patch's rows are solved once with
 /// `resample`, then `patch_iters - 1` more times on the sampled geometry (solver.wgsl's `sweep`).
 ///
 /// In an articulated substep a patch's passes after its first (which samples the rows and builds their
-/// caches) run as one block ([`solve_patch_block`]) when every row has its [`LinkDir`]s: the same
+/// caches) run as one block ([`solve_patch_block`]) when every row has its [`RowDirection`]s: the same
 /// Gauss-Seidel updates in the same order, on the patch's own Delassus matrix. `blocks` holds those
 /// matrices, one per patch in row order, built at the patch's first block after a resampling sweep (the
 /// caches they come from stand until then); None: every pass row by row
 /// ([`PatchSweep::Rows`](super::PatchSweep::Rows)).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn solve_rows(
-    ctx: &Step,
+    ctx: &SubstepInputs,
     rows: &mut [Row],
-    idle: &mut [Idle],
+    idle: &mut [RowIdleTest],
     pos: &[(Vec3, Quat)],
-    vel: &mut Vels,
+    vel: &mut StepVelocities,
     bias: bool,
     resample: bool,
     mut blocks: Option<&mut Vec<Option<PatchBlock>>>,
@@ -40,7 +40,7 @@ pub(super) fn solve_rows(
         if resample {
             for i in 0..patch.len() {
                 solve_row(ctx, patch, i, pos, vel, bias, true);
-                idle[i] = Idle::of(ctx, &patch[i]);
+                idle[i] = RowIdleTest::of(ctx, &patch[i]);
             }
             pass = 1;
         }
@@ -70,10 +70,10 @@ pub(super) fn solve_rows(
 /// What tells a row whether an update leaves it as it is, kept apart from the rows (which are large) so
 /// that a sweep reads it in one cache line: most rows within the contact offset hold no impulse and take
 /// none (the Franka's nut on the thread: ~13 of ~200 rows push), and for them the update is only this
-/// normal test. Its quantities are copies of the row's normal [`LinkDir`] and the speculative targets, so
-/// the test is [`solve_row`]'s own, bitwise. `mass` 0: no test (no LinkDir, or not yet cached).
+/// normal test. Its quantities are copies of the row's normal [`RowDirection`] and the speculative targets, so
+/// the test is [`solve_row`]'s own, bitwise. `mass` 0: no test (no RowDirection, or not yet cached).
 #[derive(Clone, Copy, Debug, Default)]
-pub(super) struct Idle {
+pub(super) struct RowIdleTest {
     d: Vec3,
     jac: [Vec3; 2],
     mass: f32,
@@ -83,20 +83,20 @@ pub(super) struct Idle {
     b: u32,
 }
 
-impl Idle {
+impl RowIdleTest {
     /// The test of row `r` as cached now.
-    fn of(ctx: &Step, r: &Row) -> Self {
+    fn of(ctx: &SubstepInputs, r: &Row) -> Self {
         // With friction pooled over the patch a row without normal impulse may still take friction.
         if ctx.cfg.friction_per_patch {
-            return Idle::default();
+            return RowIdleTest::default();
         }
-        let (Some(_), Some(c)) = (r.normal, r.cache.as_ref()) else { return Idle::default() };
-        let Some(dirs) = c.link.as_ref() else { return Idle::default() };
+        let (Some(_), Some(c)) = (r.normal, r.cache.as_ref()) else { return RowIdleTest::default() };
+        let Some(dirs) = c.link.as_ref() else { return RowIdleTest::default() };
         if c.k[0] <= 0.0 {
-            return Idle::default();
+            return RowIdleTest::default();
         }
         let n = &dirs[0];
-        Idle {
+        RowIdleTest {
             d: n.d,
             jac: n.jac,
             mass: n.mass,
@@ -110,7 +110,7 @@ impl Idle {
     /// normal update clamps to zero (then friction, limited by the row's own normal impulse, has nothing to
     /// give).
     #[inline]
-    fn stays(&self, r: &Row, vel: &Vels, bias: bool) -> bool {
+    fn stays(&self, r: &Row, vel: &StepVelocities, bias: bool) -> bool {
         if self.mass == 0.0 || r.lambda_n != 0.0 || r.lambda_t != [0.0; 2] {
             return false;
         }
@@ -124,7 +124,7 @@ impl Idle {
 /// The normal's target relative velocity [m/s] at separation `s` [m]: speculative when separated, bounded
 /// depenetration when penetrating (position sweeps, `bias`), none otherwise.
 #[inline]
-fn normal_target(ctx: &Step, s: f32, bias: bool) -> f32 {
+fn normal_target(ctx: &SubstepInputs, s: f32, bias: bool) -> f32 {
     if s > 0.0 {
         -s / ctx.h
     } else if bias {
@@ -140,7 +140,7 @@ const PATCH_DIRS: usize = 3 * PATCH_ROWS;
 
 /// A patch's Delassus matrix over its rows' directions (row j's normal, tangent 1, tangent 2 at 3j, 3j + 1,
 /// 3j + 2): `w[d][e]` is the change of direction d's relative velocity [m/s] per N s along direction e,
-/// from the [`LinkDir`]s (what `e.apply` moves, read as `d.rel` reads it). Rows without a normal this
+/// from the [`RowDirection`]s (what `e.apply` moves, read as `d.rel` reads it). Rows without a normal this
 /// substep have zero rows and columns.
 #[derive(Clone, Debug)]
 pub(super) struct PatchBlock {
@@ -148,13 +148,13 @@ pub(super) struct PatchBlock {
 }
 
 impl PatchBlock {
-    /// The block of `patch`, or None where a row that takes part has no [`LinkDir`]s (no articulation
+    /// The block of `patch`, or None where a row that takes part has no [`RowDirection`]s (no articulation
     /// response, or more link bodies than one holds) or the patch has more rows than slots.
     fn new(patch: &[Row]) -> Option<Self> {
         if patch.len() > PATCH_ROWS {
             return None;
         }
-        let mut dirs: [Option<&[LinkDir; 3]>; PATCH_ROWS] = [None; PATCH_ROWS];
+        let mut dirs: [Option<&[RowDirection; 3]>; PATCH_ROWS] = [None; PATCH_ROWS];
         for (j, r) in patch.iter().enumerate() {
             if r.normal.is_some() {
                 dirs[j] = Some(r.cache.as_ref()?.link.as_ref()?);
@@ -192,8 +192,15 @@ impl PatchBlock {
 /// impulse changes applied to the bodies once at the end (the velocities of bodies outside the patch are
 /// not read meanwhile). Equal to the row passes up to rounding. Why: a finger pad's rows are swept
 /// `link_patch_iters` (8) times per sweep, and each row pass reads two bodies and moves every link body
-/// (a [`LinkDir`] apply); on the 12 x 12 matrix a direction's update is 12 products.
-fn solve_patch_block(ctx: &Step, patch: &mut [Row], block: &PatchBlock, vel: &mut Vels, bias: bool, passes: u32) {
+/// (a [`RowDirection`] apply); on the 12 x 12 matrix a direction's update is 12 products.
+fn solve_patch_block(
+    ctx: &SubstepInputs,
+    patch: &mut [Row],
+    block: &PatchBlock,
+    vel: &mut StepVelocities,
+    bias: bool,
+    passes: u32,
+) {
     let cfg = ctx.cfg;
     let len = patch.len();
     let n_dirs = 3 * len;
@@ -271,11 +278,11 @@ fn solve_patch_block(ctx: &Step, patch: &mut [Row], block: &PatchBlock, vel: &mu
 
 /// One Gauss-Seidel update of row `i` of a patch's rows (solver.wgsl's `solve_row`).
 fn solve_row(
-    ctx: &Step,
+    ctx: &SubstepInputs,
     patch: &mut [Row],
     i: usize,
     pos: &[(Vec3, Quat)],
-    vel: &mut Vels,
+    vel: &mut StepVelocities,
     bias: bool,
     resample: bool,
 ) {
@@ -292,7 +299,7 @@ fn solve_row(
     let s = r.sep;
     let (a, b) = (r.a, r.b);
     // The lever form's relative velocity (rows without LinkDirs), reading the cache in place.
-    let rel = |vel: &Vels| {
+    let rel = |vel: &StepVelocities| {
         let l = &c.lever;
         (vel.v[a][0] + vel.v[a][1].cross(l.ra)) - (vel.v[b][0] + vel.v[b][1].cross(l.rb))
     };
@@ -356,16 +363,18 @@ fn solve_row(
 /// sweep's update copies the cache through the stack (about a third of the solve in store-forwarding
 /// stalls under perf). False where the row has no normal (the SDF had no gradient there).
 #[inline(never)]
-fn prepare_row(ctx: &Step, r: &mut Row, pos: &[(Vec3, Quat)], resample: bool) -> bool {
+fn prepare_row(ctx: &SubstepInputs, r: &mut Row, pos: &[(Vec3, Quat)], resample: bool) -> bool {
     let cfg = ctx.cfg;
     let n = if resample {
         let ((pa, qa), (pb, qb)) = (pos[r.a], pos[r.b]);
         let pair = &ctx.flat.pairs[r.pair];
         let x = pa + qa * r.anchor_a;
         // The SDF shape's frame: body b's pose times the shape's pose on it.
-        let body_b = Xf { p: pb, q: Vec4::from(qb) };
-        let shape_b = body_b
-            .mul(&Xf { p: Vec3::new(pair.b_pos[0], pair.b_pos[1], pair.b_pos[2]), q: Vec4::from_array(pair.b_rot) });
+        let body_b = RigidTransform { p: pb, q: Vec4::from(qb) };
+        let shape_b = body_b.mul(&RigidTransform {
+            p: Vec3::new(pair.b_pos[0], pair.b_pos[1], pair.b_pos[2]),
+            q: Vec4::from_array(pair.b_rot),
+        });
         let (phi, g) = sdf_sample_cpu(pair, &ctx.flat.sdf_values, shape_b.inv().point(x));
         let glen = g.length();
         if glen <= 0.0 {

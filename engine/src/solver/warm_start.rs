@@ -130,7 +130,7 @@ impl WarmStart {
     }
 
     /// Renumbers the pairs of last frame's rows (`map`: old pair index -> new, None: the pair is gone and
-    /// its rows are dropped), for callers whose pair list changes from frame to frame (crate::crowd).
+    /// its rows are dropped), for callers whose pair list changes from frame to frame (crate::many_body).
     pub fn remap_pairs(&mut self, map: impl Fn(usize) -> Option<usize>) {
         for rows in &mut self.rows {
             rows.retain_mut(|r| match map(r.pair) {

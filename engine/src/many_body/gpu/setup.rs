@@ -1,16 +1,16 @@
-//! Building a [`CrowdPipeline`](super::CrowdPipeline): the checks against the device, the uniform and storage
+//! Building a [`ManyBodyPipeline`](super::ManyBodyPipeline): the checks against the device, the uniform and storage
 //! buffers, the layouts and pipelines, and the bind groups, each in its order of creation.
 
 use super::{
-    rest_offset, CrowdParamsGpu, PassParamsGpu, ARGS_WORDS, CONTACTS_WGSL, CROWD_COMMON, MERGE_WGSL, M_HEAD, NEAR_WGSL,
-    PHASES, SOLVE_WGSL,
+    rest_offset, ManyBodyParamsGpu, PassParamsGpu, ARGS_WORDS, CONTACTS_WGSL, MANY_BODY_COMMON, MERGE_WGSL, M_HEAD,
+    NEAR_WGSL, PHASES, SOLVE_WGSL,
 };
 use crate::contact::generate::{reduce_with_subgroups, shader_source_wg, SdfKinds};
 use crate::contact::model::{PairGpu, ParamsGpu, PatchGpu};
 use crate::contact::{ContactConfig, TransformGpu};
-use crate::crowd::{CrowdConfig, CrowdFlat, CrowdModel};
 use crate::error::{EngineError, Result};
 use crate::gpu::{Binding, ExplicitLayout, GpuContext};
+use crate::many_body::{ManyBodyConfig, ManyBodyFlat, ManyBodyModel};
 use crate::solver::gpu::{bodies_gpu, solver_constants, solver_params};
 use crate::solver::{BodyModel, SolverConfig};
 use glam::{Quat, Vec3};
@@ -24,18 +24,18 @@ fn too_large(gpu: &GpuContext, what: String, bytes: u64, hint: &str) -> Result<(
     Ok(())
 }
 
-/// Job sizes for the crowd: short jobs cull well, but each holds a patch budget of its own, so with the
+/// Job sizes for many-body worlds: short jobs cull well, but each holds a patch budget of its own, so with the
 /// default chunk the jobs grow until the per-job patches fit one binding (an M16 nut's 2872 triangles: 12
 /// jobs of 256 for 10000 pairs would need 154 MB, 6 of 512 fit).
 pub(super) fn fit_jobs(
     gpu: &GpuContext,
-    model: &CrowdModel,
+    model: &ManyBodyModel,
     world_count: u32,
-    cfg: &CrowdConfig,
+    cfg: &ManyBodyConfig,
     contact: &ContactConfig,
-) -> Result<CrowdFlat> {
-    let mut flat = CrowdFlat::new(model, contact)?;
-    let job_bytes = |f: &CrowdFlat| {
+) -> Result<ManyBodyFlat> {
+    let mut flat = ManyBodyFlat::new(model, contact)?;
+    let job_bytes = |f: &ManyBodyFlat| {
         world_count as u64
             * cfg.max_pairs as u64
             * f.jobs_per_pair as u64
@@ -47,29 +47,29 @@ pub(super) fn fit_jobs(
         && flat.jobs_per_pair > 1
         && 2 * flat.chunk <= contact.max_chunk_triangles()
     {
-        flat = CrowdFlat::new(model, &ContactConfig { chunk_triangles: 2 * flat.chunk, ..contact.clone() })?;
+        flat = ManyBodyFlat::new(model, &ContactConfig { chunk_triangles: 2 * flat.chunk, ..contact.clone() })?;
     }
     Ok(flat)
 }
 
-/// Bytes of a crowd's scratch buffer: the sleeping state, two vec4 per body, after the rows (solve.wgsl's
+/// Bytes of a many-body pipeline's scratch buffer: the sleeping state, two vec4 per body, after the rows (solve.wgsl's
 /// rest_index).
-fn scratch_bytes(world_count: u32, body_count: u32, cfg: &CrowdConfig) -> u64 {
+fn scratch_bytes(world_count: u32, body_count: u32, cfg: &ManyBodyConfig) -> u64 {
     rest_offset(world_count, body_count, cfg) + world_count as u64 * body_count as u64 * 32
 }
 
-/// Words of one world's meta block (crowd_common.wgsl).
-fn meta_stride(body_count: u32, cfg: &CrowdConfig) -> u32 {
+/// Words of one world's meta block (many_body_common.wgsl).
+fn meta_stride(body_count: u32, cfg: &ManyBodyConfig) -> u32 {
     M_HEAD + 4 * body_count + 9 * cfg.max_pairs
 }
 
 /// Checks the dispatch sizes, the workgroup memory and every buffer's size against the device.
 pub(super) fn check_sizes(
     gpu: &GpuContext,
-    flat: &CrowdFlat,
+    flat: &ManyBodyFlat,
     world_count: u32,
     n: u32,
-    cfg: &CrowdConfig,
+    cfg: &ManyBodyConfig,
     contact: &ContactConfig,
 ) -> Result<()> {
     let limits = gpu.limits();
@@ -130,15 +130,15 @@ pub(super) fn check_sizes(
     )
 }
 
-/// The crowd's uniform parameters.
-pub(super) fn crowd_params(
-    model: &CrowdModel,
-    flat: &CrowdFlat,
+/// The many_body's uniform parameters.
+pub(super) fn many_body_params(
+    model: &ManyBodyModel,
+    flat: &ManyBodyFlat,
     world_count: u32,
-    cfg: &CrowdConfig,
-) -> CrowdParamsGpu {
+    cfg: &ManyBodyConfig,
+) -> ManyBodyParamsGpu {
     let n = model.body_count;
-    CrowdParamsGpu {
+    ManyBodyParamsGpu {
         world_count,
         body_count: n,
         cap: cfg.max_pairs,
@@ -159,7 +159,7 @@ pub(super) fn crowd_params(
 
 /// Per-dispatch parameters, one slot of `pass_stride` bytes each: the colouring rounds, then 5 solver phases x
 /// 32 colours.
-fn pass_bytes(cfg: &CrowdConfig, pass_stride: u64) -> Vec<u8> {
+fn pass_bytes(cfg: &ManyBodyConfig, pass_stride: u64) -> Vec<u8> {
     let mut passes = Vec::new();
     for r in 0..cfg.colour_rounds {
         passes.push(PassParamsGpu { index: r, bias: 0, _pad: [0; 2] });
@@ -177,9 +177,9 @@ fn pass_bytes(cfg: &CrowdConfig, pass_stride: u64) -> Vec<u8> {
     pass_bytes
 }
 
-/// The crowd's uniform buffers.
+/// The many_body's uniform buffers.
 pub(super) struct Uniforms {
-    crowd: wgpu::Buffer,
+    many_body: wgpu::Buffer,
     contact: wgpu::Buffer,
     solver: wgpu::Buffer,
     /// The per-dispatch slots of [`pass_bytes`], bound with a dynamic offset.
@@ -190,9 +190,9 @@ impl Uniforms {
     /// The uniform buffers and the stride of the per-dispatch slots [bytes].
     pub(super) fn new(
         gpu: &GpuContext,
-        params: &CrowdParamsGpu,
+        params: &ManyBodyParamsGpu,
         bodies: &BodyModel,
-        cfg: &CrowdConfig,
+        cfg: &ManyBodyConfig,
         contact: &ContactConfig,
         solver: &SolverConfig,
     ) -> (Self, u64) {
@@ -208,16 +208,16 @@ impl Uniforms {
             job_base: 0,
         };
         let sp = solver_params(solver, bodies, world_count, cfg.max_pairs, cfg.max_patches_per_world * 4, 0);
-        let crowd = gpu.uniform_buffer("crowd-params", bytemuck::bytes_of(params));
-        let contact = gpu.uniform_buffer("crowd-contact-params", bytemuck::bytes_of(&contact_params));
-        let solver = gpu.uniform_buffer("crowd-solver-params", bytemuck::bytes_of(&sp));
+        let many_body = gpu.uniform_buffer("many_body-params", bytemuck::bytes_of(params));
+        let contact = gpu.uniform_buffer("many_body-contact-params", bytemuck::bytes_of(&contact_params));
+        let solver = gpu.uniform_buffer("many_body-solver-params", bytemuck::bytes_of(&sp));
         let pass_stride = (gpu.limits().min_uniform_buffer_offset_alignment as u64).max(16);
-        let passes = gpu.uniform_buffer("crowd-passes", &pass_bytes(cfg, pass_stride));
-        (Uniforms { crowd, contact, solver, passes }, pass_stride)
+        let passes = gpu.uniform_buffer("many_body-passes", &pass_bytes(cfg, pass_stride));
+        (Uniforms { many_body, contact, solver, passes }, pass_stride)
     }
 }
 
-/// The crowd's storage and indirect buffers.
+/// The many_body's storage and indirect buffers.
 pub(super) struct Storage {
     pub(super) templates: wgpu::Buffer,
     pub(super) rules: wgpu::Buffer,
@@ -227,7 +227,7 @@ pub(super) struct Storage {
     pub(super) body_q: wgpu::Buffer,
     pub(super) body_qd: wgpu::Buffer,
     pub(super) scratch: wgpu::Buffer,
-    pub(super) crowd_pairs: wgpu::Buffer,
+    pub(super) many_body_pairs: wgpu::Buffer,
     pub(super) meta: wgpu::Buffer,
     pub(super) args: wgpu::Buffer,
     pub(super) job_patches: wgpu::Buffer,
@@ -239,33 +239,34 @@ pub(super) struct Storage {
 impl Storage {
     pub(super) fn new(
         gpu: &GpuContext,
-        model: &CrowdModel,
+        model: &ManyBodyModel,
         bodies: &BodyModel,
-        flat: &CrowdFlat,
-        params: &CrowdParamsGpu,
-        cfg: &CrowdConfig,
+        flat: &ManyBodyFlat,
+        params: &ManyBodyParamsGpu,
+        cfg: &ManyBodyConfig,
         contact: &ContactConfig,
     ) -> Self {
         let (n, jobs) = (params.body_count, params.jobs_per_pair);
         let (w, cap, mp) = (params.world_count as u64, cfg.max_pairs as u64, contact.max_patches as u64);
         let patch_bytes = std::mem::size_of::<PatchGpu>() as u64;
         let none = wgpu::BufferUsages::empty();
-        let templates = gpu.storage_buffer("crowd-templates", &flat.flat.pairs, none);
+        let templates = gpu.storage_buffer("many_body-templates", &flat.flat.pairs, none);
         let mut rules = model.body_class.clone();
         rules.extend(&model.body_rule);
         rules.extend(&model.static_rule);
-        let rules = gpu.storage_buffer("crowd-rules", &rules, none);
-        let tri_verts = gpu.storage_buffer("crowd-tri-verts", &flat.flat.tri_verts, none);
-        let job_bounds = gpu.storage_buffer("crowd-job-bounds", &flat.job_bounds, none);
-        let sdf_values = gpu.storage_buffer("crowd-sdf-values", &flat.flat.sdf_values, none);
+        let rules = gpu.storage_buffer("many_body-rules", &rules, none);
+        let tri_verts = gpu.storage_buffer("many_body-tri-verts", &flat.flat.tri_verts, none);
+        let job_bounds = gpu.storage_buffer("many_body-job-bounds", &flat.job_bounds, none);
+        let sdf_values = gpu.storage_buffer("many_body-sdf-values", &flat.flat.sdf_values, none);
         let identity = vec![TransformGpu::new(Vec3::ZERO, Quat::IDENTITY); (w * n as u64) as usize];
-        let body_q = gpu.storage_buffer("crowd-body-q", &identity, none);
-        let body_qd = gpu.storage_buffer_zeroed("crowd-body-qd", w * n as u64 * 32);
-        let scratch = gpu.storage_buffer_zeroed("crowd-scratch", scratch_bytes(params.world_count, n, cfg));
-        let crowd_pairs = gpu.storage_buffer_zeroed("crowd-pairs", w * cap * std::mem::size_of::<PairGpu>() as u64);
-        let meta = gpu.storage_buffer_zeroed("crowd-meta", w * params.meta_stride as u64 * 4);
+        let body_q = gpu.storage_buffer("many_body-body-q", &identity, none);
+        let body_qd = gpu.storage_buffer_zeroed("many_body-body-qd", w * n as u64 * 32);
+        let scratch = gpu.storage_buffer_zeroed("many_body-scratch", scratch_bytes(params.world_count, n, cfg));
+        let many_body_pairs =
+            gpu.storage_buffer_zeroed("many_body-pairs", w * cap * std::mem::size_of::<PairGpu>() as u64);
+        let meta = gpu.storage_buffer_zeroed("many_body-meta", w * params.meta_stride as u64 * 4);
         let args = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("crowd-args"),
+            label: Some("many_body-args"),
             size: ARGS_WORDS * 4,
             usage: wgpu::BufferUsages::STORAGE
                 | wgpu::BufferUsages::INDIRECT
@@ -273,10 +274,10 @@ impl Storage {
                 | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let job_patches = gpu.storage_buffer_zeroed("crowd-job-patches", w * cap * jobs as u64 * mp * patch_bytes);
-        let job_patch_count = gpu.storage_buffer_zeroed("crowd-job-patch-count", w * cap * jobs as u64 * 4);
-        let patches = gpu.storage_buffer_zeroed("crowd-patches", w * cap * mp * patch_bytes);
-        let bodies = gpu.storage_buffer("crowd-bodies", &bodies_gpu(bodies), none);
+        let job_patches = gpu.storage_buffer_zeroed("many_body-job-patches", w * cap * jobs as u64 * mp * patch_bytes);
+        let job_patch_count = gpu.storage_buffer_zeroed("many_body-job-patch-count", w * cap * jobs as u64 * 4);
+        let patches = gpu.storage_buffer_zeroed("many_body-patches", w * cap * mp * patch_bytes);
+        let bodies = gpu.storage_buffer("many_body-bodies", &bodies_gpu(bodies), none);
         Storage {
             templates,
             rules,
@@ -286,7 +287,7 @@ impl Storage {
             body_q,
             body_qd,
             scratch,
-            crowd_pairs,
+            many_body_pairs,
             meta,
             args,
             job_patches,
@@ -297,7 +298,7 @@ impl Storage {
     }
 }
 
-/// The crowd's layouts and pipelines.
+/// The many_body's layouts and pipelines.
 pub(super) struct Kernels {
     pub(super) near_layout: ExplicitLayout,
     pub(super) contact_layout: ExplicitLayout,
@@ -312,8 +313,8 @@ pub(super) struct Kernels {
 impl Kernels {
     pub(super) fn new(
         gpu: &GpuContext,
-        flat: &CrowdFlat,
-        cfg: &CrowdConfig,
+        flat: &ManyBodyFlat,
+        cfg: &ManyBodyConfig,
         contact: &ContactConfig,
         solver: &SolverConfig,
     ) -> Self {
@@ -324,20 +325,20 @@ impl Kernels {
         let per = contact.candidates_per_invocation;
         let subgroups = reduce_with_subgroups(gpu, contact);
         let source = |body: &str| {
-            shader_source_wg(&format!("{CROWD_COMMON}\n{body}"), contact.max_patches, wg, per, kinds, subgroups)
+            shader_source_wg(&format!("{MANY_BODY_COMMON}\n{body}"), contact.max_patches, wg, per, kinds, subgroups)
         };
         let near_layout = gpu.explicit_layout(
-            "crowd-near",
+            "many_body-near",
             &[&[Binding::Uniform, ro, ro], &[ro, ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
         );
         let contact_layout = gpu.explicit_layout(
-            "crowd-contacts",
+            "many_body-contacts",
             &[&[Binding::Uniform, Binding::Uniform, ro, ro, ro], &[ro, ro], &[rw, rw, rw]],
         );
         let merge_layout =
-            gpu.explicit_layout("crowd-merge", &[&[Binding::Uniform, Binding::Uniform], &[ro, ro, ro], &[rw, rw]]);
+            gpu.explicit_layout("many_body-merge", &[&[Binding::Uniform, Binding::Uniform], &[ro, ro, ro], &[rw, rw]]);
         let solve_layout = gpu.explicit_layout(
-            "crowd-solve",
+            "many_body-solve",
             &[&[Binding::Uniform, Binding::Uniform, ro, ro], &[ro, ro, ro], &[rw, rw, rw], &[Binding::UniformDynamic]],
         );
         let near_src = source(NEAR_WGSL);
@@ -354,21 +355,21 @@ impl Kernels {
         .map(|e| gpu.pipeline_on(&near_layout, e, &near_src, e));
         let contacts_src = source(CONTACTS_WGSL);
         let contacts: [wgpu::ComputePipeline; 2] =
-            ["crowd_generate", "crowd_alloc"].map(|e| gpu.pipeline_on(&contact_layout, e, &contacts_src, e));
-        let merge = gpu.pipeline_on(&merge_layout, "crowd_merge", &source(MERGE_WGSL), "crowd_merge");
+            ["many_body_generate", "many_body_alloc"].map(|e| gpu.pipeline_on(&contact_layout, e, &contacts_src, e));
+        let merge = gpu.pipeline_on(&merge_layout, "many_body_merge", &source(MERGE_WGSL), "many_body_merge");
         let solve_src = source(SOLVE_WGSL);
         let mut constants = solver_constants(solver).to_vec();
         constants.push(("SLEEP", if cfg.sleep.enabled() { 1.0 } else { 0.0 }));
         let solve: [wgpu::ComputePipeline; 9] = [
-            "crowd_build_rows",
-            "crowd_velocities",
-            "crowd_pass",
-            "crowd_positions",
-            "crowd_finish",
-            "crowd_pass_resample",
-            "crowd_pass_warm",
-            "crowd_wake",
-            "crowd_sleep",
+            "many_body_build_rows",
+            "many_body_velocities",
+            "many_body_pass",
+            "many_body_positions",
+            "many_body_finish",
+            "many_body_pass_resample",
+            "many_body_pass_warm",
+            "many_body_wake",
+            "many_body_sleep",
         ]
         .map(|e| gpu.pipeline_on_with(&solve_layout, e, &solve_src, e, &constants));
         Kernels { near_layout, contact_layout, merge_layout, solve_layout, near, contacts, merge, solve }
@@ -380,24 +381,32 @@ impl Kernels {
         let near_groups = explicit_groups(
             gpu,
             &self.near_layout,
-            &[&[&u.crowd, &s.templates, &s.rules], &[&s.body_q, &s.scratch], &[&s.crowd_pairs, &s.meta, &s.args]],
+            &[
+                &[&u.many_body, &s.templates, &s.rules],
+                &[&s.body_q, &s.scratch],
+                &[&s.many_body_pairs, &s.meta, &s.args],
+            ],
             passes,
         );
-        // The colouring rounds are dispatched indirectly from crowd_args, which a dispatch may not also bind
+        // The colouring rounds are dispatched indirectly from many_body_args, which a dispatch may not also bind
         // for writing: they get a stand-in (they never touch the arguments).
-        let stand_in = gpu.storage_buffer_zeroed("crowd-args-stand-in", ARGS_WORDS * 4);
+        let stand_in = gpu.storage_buffer_zeroed("many_body-args-stand-in", ARGS_WORDS * 4);
         let round_groups = explicit_groups(
             gpu,
             &self.near_layout,
-            &[&[&u.crowd, &s.templates, &s.rules], &[&s.body_q, &s.scratch], &[&s.crowd_pairs, &s.meta, &stand_in]],
+            &[
+                &[&u.many_body, &s.templates, &s.rules],
+                &[&s.body_q, &s.scratch],
+                &[&s.many_body_pairs, &s.meta, &stand_in],
+            ],
             passes,
         );
         let contact_groups = explicit_groups(
             gpu,
             &self.contact_layout,
             &[
-                &[&u.contact, &u.crowd, &s.tri_verts, &s.sdf_values, &s.job_bounds],
-                &[&s.body_q, &s.crowd_pairs],
+                &[&u.contact, &u.many_body, &s.tri_verts, &s.sdf_values, &s.job_bounds],
+                &[&s.body_q, &s.many_body_pairs],
                 &[&s.job_patches, &s.job_patch_count, &s.meta],
             ],
             None,
@@ -405,15 +414,19 @@ impl Kernels {
         let merge_groups = explicit_groups(
             gpu,
             &self.merge_layout,
-            &[&[&u.contact, &u.crowd], &[&s.crowd_pairs, &s.job_patches, &s.job_patch_count], &[&s.meta, &s.patches]],
+            &[
+                &[&u.contact, &u.many_body],
+                &[&s.many_body_pairs, &s.job_patches, &s.job_patch_count],
+                &[&s.meta, &s.patches],
+            ],
             None,
         );
         let solve_groups = explicit_groups(
             gpu,
             &self.solve_layout,
             &[
-                &[&u.solver, &u.crowd, &s.sdf_values, &s.bodies],
-                &[&s.crowd_pairs, &s.patches, &s.meta],
+                &[&u.solver, &u.many_body, &s.sdf_values, &s.bodies],
+                &[&s.many_body_pairs, &s.patches, &s.meta],
                 &[&s.body_q, &s.body_qd, &s.scratch],
             ],
             passes,

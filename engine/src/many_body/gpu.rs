@@ -1,8 +1,8 @@
 //! The many-body world on the GPU (near.wgsl, contacts.wgsl, solve.wgsl): buffers, pipelines and the
-//! per-frame dispatches. The CPU twin is [`super::CrowdCpu`]; `engine/tests/crowd.rs` checks parity,
+//! per-frame dispatches. The CPU twin is [`super::ManyBodyCpu`]; `engine/tests/many_body.rs` checks parity,
 //! the colouring and bitwise determinism.
 
-use super::{CrowdConfig, CrowdFlat, CrowdFrame, CrowdModel, NearPair, RestState, COLOUR_NONE, UNCOLOURED};
+use super::{ManyBodyConfig, ManyBodyFlat, ManyBodyFrame, ManyBodyModel, NearPair, RestState, COLOUR_NONE, UNCOLOURED};
 use crate::contact::model::{PairGpu, PatchGpu};
 use crate::contact::pipeline::to_patches;
 use crate::contact::{ContactConfig, Patch, TransformGpu};
@@ -12,7 +12,7 @@ use crate::solver::{BodyModel, BodyState, Control, SolverConfig};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
-const CROWD_COMMON: &str = include_str!("crowd_common.wgsl");
+const MANY_BODY_COMMON: &str = include_str!("many_body_common.wgsl");
 const NEAR_WGSL: &str = include_str!("near.wgsl");
 const CONTACTS_WGSL: &str = concat!(
     include_str!("contacts.wgsl"),
@@ -31,31 +31,31 @@ const SOLVE_WGSL: &str = concat!(
     include_str!("../sdf/revolved.wgsl")
 );
 
-/// Words at the head of a world's meta block (crowd_common.wgsl's M_HEAD).
+/// Words at the head of a world's meta block (many_body_common.wgsl's M_HEAD).
 const M_HEAD: u32 = 64;
 const M_COUNT: usize = 0;
 const M_FLAGS: usize = 1;
 const M_COLOURS: usize = 3;
 const M_PATCHES: usize = 4;
 /// Per-pair arrays of a world's meta block, by their place after the per-body arrays
-/// (crowd_common.wgsl's m_colour, m_patch_count, m_candidates).
+/// (many_body_common.wgsl's m_colour, m_patch_count, m_candidates).
 const P_COLOUR: u32 = 1;
 const P_PATCH_COUNT: u32 = 5;
 const P_CANDIDATES: u32 = 6;
-/// Indirect arguments (crowd_common.wgsl's A_*): pairs, generate, merge, then 32 colours.
+/// Indirect arguments (many_body_common.wgsl's A_*): pairs, generate, merge, then 32 colours.
 const A_PAIRS: u64 = 0;
 const A_GENERATE: u64 = 3;
 const A_MERGE: u64 = 6;
 const A_COLOUR: u64 = 9;
 const ARGS_WORDS: u64 = A_COLOUR + 3 * 32;
-/// Solver pass phases [warm, bias, resample]: warm and resample pick the crowd_pass entry point, bias goes to
+/// Solver pass phases [warm, bias, resample]: warm and resample pick the many_body_pass entry point, bias goes to
 /// the phase's uniform slot (PassParams), one slot per phase and colour.
 const PHASES: [[u32; 3]; 5] = [[1, 1, 0], [0, 1, 1], [0, 1, 0], [0, 0, 1], [0, 0, 0]];
 
-/// GPU mirror of `CrowdParams` in crowd_common.wgsl.
+/// GPU mirror of `ManyBodyParams` in many_body_common.wgsl.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub struct CrowdParamsGpu {
+pub struct ManyBodyParamsGpu {
     pub world_count: u32,
     pub body_count: u32,
     pub cap: u32,
@@ -74,7 +74,7 @@ pub struct CrowdParamsGpu {
     pub _pad: [u32; 2],
 }
 
-/// GPU mirror of `PassParams` in crowd_common.wgsl.
+/// GPU mirror of `PassParams` in many_body_common.wgsl.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 struct PassParamsGpu {
@@ -85,7 +85,7 @@ struct PassParamsGpu {
 
 /// Figures of one world's last frame, read back for reports.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct CrowdStats {
+pub struct ManyBodyStats {
     /// Near pairs in the list.
     pub pairs: u32,
     /// Near pairs with at least one patch.
@@ -101,14 +101,14 @@ pub struct CrowdStats {
 }
 
 /// Buffers and pipelines of many-body worlds (see the module doc of [`super`]).
-pub struct CrowdPipeline {
-    pub flat: CrowdFlat,
-    pub cfg: CrowdConfig,
+pub struct ManyBodyPipeline {
+    pub flat: ManyBodyFlat,
+    pub cfg: ManyBodyConfig,
     pub contact: ContactConfig,
     pub solver: SolverConfig,
     pub world_count: u32,
     pub body_count: u32,
-    params: CrowdParamsGpu,
+    params: ManyBodyParamsGpu,
     /// Body poses, shape [world_count * body_count].
     pub body_q: wgpu::Buffer,
     /// Body velocities (linear, angular) [m/s, rad/s], shape [world_count * body_count * 2] vec4.
@@ -116,8 +116,8 @@ pub struct CrowdPipeline {
     /// Status per world, external wrenches, two blocks of rows (solve.wgsl).
     pub scratch: wgpu::Buffer,
     /// Near-pair records, shape [world_count * max_pairs].
-    pub crowd_pairs: wgpu::Buffer,
-    /// Per-world bookkeeping (crowd_common.wgsl).
+    pub many_body_pairs: wgpu::Buffer,
+    /// Per-world bookkeeping (many_body_common.wgsl).
     pub meta: wgpu::Buffer,
     /// Reduced patches, shape [world_count * max_pairs * max_patches].
     pub patches: wgpu::Buffer,
@@ -134,29 +134,29 @@ pub struct CrowdPipeline {
     solve_groups: Vec<wgpu::BindGroup>,
 }
 
-/// Byte offset of the sleeping state in a crowd's scratch buffer: after the status, the wrenches and the two
+/// Byte offset of the sleeping state in a many-body world's scratch buffer: after the status, the wrenches and the two
 /// blocks of rows (solve.wgsl's rest_index).
-fn rest_offset(world_count: u32, body_count: u32, cfg: &CrowdConfig) -> u64 {
+fn rest_offset(world_count: u32, body_count: u32, cfg: &ManyBodyConfig) -> u64 {
     crate::solver::gpu::rows_offset(world_count, body_count) + 2 * world_count as u64 * world_rows_bytes(cfg)
 }
 
 /// Bytes of one world's rows in one of the scratch buffer's two blocks.
-fn world_rows_bytes(cfg: &CrowdConfig) -> u64 {
+fn world_rows_bytes(cfg: &ManyBodyConfig) -> u64 {
     cfg.max_patches_per_world as u64 * 4 * crate::solver::gpu::ROW_VEC4 * 16
 }
 
 mod setup;
 
-use setup::{check_sizes, crowd_params, fit_jobs, Kernels, Storage, Uniforms};
+use setup::{check_sizes, fit_jobs, many_body_params, Kernels, Storage, Uniforms};
 
-impl CrowdPipeline {
+impl ManyBodyPipeline {
     /// Validates the settings against the model and the device, uploads the model, builds the pipelines.
     pub fn new(
         gpu: &GpuContext,
-        model: &CrowdModel,
+        model: &ManyBodyModel,
         bodies: &BodyModel,
         world_count: u32,
-        cfg: &CrowdConfig,
+        cfg: &ManyBodyConfig,
         contact: &ContactConfig,
         solver: &SolverConfig,
     ) -> Result<Self> {
@@ -164,15 +164,15 @@ impl CrowdPipeline {
         let flat = fit_jobs(gpu, model, world_count, cfg, contact)?;
         let n = model.body_count;
         check_sizes(gpu, &flat, world_count, n, cfg, contact)?;
-        let params = crowd_params(model, &flat, world_count, cfg);
+        let params = many_body_params(model, &flat, world_count, cfg);
         let (uniforms, pass_stride) = Uniforms::new(gpu, &params, bodies, cfg, contact, solver);
         let storage = Storage::new(gpu, model, bodies, &flat, &params, cfg, contact);
         let kernels = Kernels::new(gpu, &flat, cfg, contact, solver);
         let [near_groups, round_groups, contact_groups, merge_groups, solve_groups] =
             kernels.bind_groups(gpu, &uniforms, &storage);
-        let Storage { body_q, body_qd, scratch, crowd_pairs, meta, patches, args, .. } = storage;
+        let Storage { body_q, body_qd, scratch, many_body_pairs, meta, patches, args, .. } = storage;
         let Kernels { near, contacts, merge, solve, .. } = kernels;
-        Ok(CrowdPipeline {
+        Ok(ManyBodyPipeline {
             flat,
             cfg: cfg.clone(),
             contact: contact.clone(),
@@ -183,7 +183,7 @@ impl CrowdPipeline {
             body_q,
             body_qd,
             scratch,
-            crowd_pairs,
+            many_body_pairs,
             meta,
             patches,
             args,
@@ -293,8 +293,10 @@ impl CrowdPipeline {
     /// Contact handling (paper Table I: pair finding, generation, reduction): near pairs, then contacts.
     pub fn encode_handling(&self, enc: &mut wgpu::CommandEncoder) {
         enc.clear_buffer(&self.args, 0, None);
-        let mut pass = enc
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("crowd-handling"), timestamp_writes: None });
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("many_body-handling"),
+            timestamp_writes: None,
+        });
         let (wc, bodies_x) = (self.world_count, self.body_count.div_ceil(64));
         let ng = &self.near_groups;
         let grid = [
@@ -311,7 +313,7 @@ impl CrowdPipeline {
             // Wake sleepers near bodies that moved, then leave out the pairs whose bodies all sleep.
             self.set(&mut pass, &self.solve[7], &self.solve_groups, None);
             pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
-            // (Dispatched from crowd_args: it binds the stand-in, as the colouring rounds.)
+            // (Dispatched from many_body_args: it binds the stand-in, as the colouring rounds.)
             self.set(&mut pass, &self.near[7], &self.round_groups, None);
             pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
         }
@@ -327,8 +329,10 @@ impl CrowdPipeline {
     /// Contact solution (Table I: constraint preparation, iterative solution, integration): the colouring,
     /// the rows, the coloured sweeps and integration, the status.
     pub fn encode_solve(&self, enc: &mut wgpu::CommandEncoder) {
-        let mut pass =
-            enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("crowd-solve"), timestamp_writes: None });
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("many_body-solve"),
+            timestamp_writes: None,
+        });
         let (wc, bodies_x) = (self.world_count, self.body_count.div_ceil(64));
         let ng = &self.near_groups;
         self.set(&mut pass, &self.near[4], ng, None);
@@ -343,7 +347,7 @@ impl CrowdPipeline {
         self.set(&mut pass, &self.solve[0], sg, None);
         pass.dispatch_workgroups_indirect(&self.args, A_PAIRS * 4);
         let sweep = |pass: &mut wgpu::ComputePass, phase: u32| {
-            // The entry point for the phase's warm and resample flags (solve.wgsl crowd_pass*).
+            // The entry point for the phase's warm and resample flags (solve.wgsl many_body_pass*).
             let kernel = match PHASES[phase as usize] {
                 [1, _, _] => &self.solve[6],
                 [0, _, 1] => &self.solve[5],
@@ -406,22 +410,22 @@ impl CrowdPipeline {
     }
 
     /// Each world's last frame: its near pairs, colours and flags (waits; for tests and reports).
-    pub fn read_frames(&self, gpu: &GpuContext) -> Vec<CrowdFrame> {
+    pub fn read_frames(&self, gpu: &GpuContext) -> Vec<ManyBodyFrame> {
         let meta = self.meta_words(gpu);
-        let pairs: Vec<PairGpu> = gpu.read_buffer(&self.crowd_pairs);
+        let pairs: Vec<PairGpu> = gpu.read_buffer(&self.many_body_pairs);
         (0..self.world_count).map(|w| self.frame_of(&meta, &pairs, w)).collect()
     }
 
     /// World `w`'s frame from the bookkeeping words and pair records read back.
-    fn frame_of(&self, meta: &[u32], pairs: &[PairGpu], w: u32) -> CrowdFrame {
+    fn frame_of(&self, meta: &[u32], pairs: &[PairGpu], w: u32) -> ManyBodyFrame {
         let m = self.world_meta(meta, w);
         let count = m[M_COUNT] as usize;
         let base = (w * self.cfg.max_pairs) as usize;
         let colour = &m[self.pair_array(P_COLOUR)..];
-        CrowdFrame {
+        ManyBodyFrame {
             pairs: pairs[base..base + count]
                 .iter()
-                .map(|p| NearPair { a: p.body_a, key: p.job_first, b: p.body_b, template: p.crowd_template })
+                .map(|p| NearPair { a: p.body_a, key: p.job_first, b: p.body_b, template: p.many_body_template })
                 .collect(),
             colours: colour[..count].iter().map(|&c| if c == UNCOLOURED { COLOUR_NONE } else { c & 0xff }).collect(),
             colour_count: m[M_COLOURS],
@@ -430,11 +434,11 @@ impl CrowdPipeline {
     }
 
     /// Each world's last frame with the reduced patches of each of its near pairs, in list order (waits;
-    /// for tests and reports; every buffer is read once). The crowd kernels compute no per-contact
+    /// for tests and reports; every buffer is read once). The many-body kernels compute no per-contact
     /// normals: each contact carries its patch's normal.
-    pub fn read_patches(&self, gpu: &GpuContext) -> Vec<(CrowdFrame, Vec<Vec<Patch>>)> {
+    pub fn read_patches(&self, gpu: &GpuContext) -> Vec<(ManyBodyFrame, Vec<Vec<Patch>>)> {
         let meta = self.meta_words(gpu);
-        let pairs: Vec<PairGpu> = gpu.read_buffer(&self.crowd_pairs);
+        let pairs: Vec<PairGpu> = gpu.read_buffer(&self.many_body_pairs);
         let raw: Vec<PatchGpu> = gpu.read_buffer(&self.patches);
         let mp = self.contact.max_patches as usize;
         (0..self.world_count)
@@ -455,7 +459,7 @@ impl CrowdPipeline {
     }
 
     /// Each world's contact figures of the last frame (waits; for reports).
-    pub fn read_stats(&self, gpu: &GpuContext) -> Vec<CrowdStats> {
+    pub fn read_stats(&self, gpu: &GpuContext) -> Vec<ManyBodyStats> {
         let meta = self.meta_words(gpu);
         let patches: Vec<PatchGpu> = gpu.read_buffer(&self.patches);
         let mp = self.contact.max_patches as usize;
@@ -474,7 +478,7 @@ impl CrowdPipeline {
                             .sum::<u32>()
                     })
                     .sum();
-                CrowdStats {
+                ManyBodyStats {
                     pairs: count as u32,
                     touching_pairs: pc.iter().filter(|&&c| c > 0).count() as u32,
                     candidates: cand.iter().map(|&c| c as u64).sum(),
@@ -494,7 +498,7 @@ mod tests {
     use crate::contact::generate::{shader_source_wg, SdfKinds};
 
     #[test]
-    fn crowd_shaders_validate_with_naga() {
+    fn many_body_shaders_validate_with_naga() {
         for (name, body) in
             [("near", NEAR_WGSL), ("contacts", CONTACTS_WGSL), ("merge", MERGE_WGSL), ("solve", SOLVE_WGSL)]
         {
@@ -502,7 +506,7 @@ mod tests {
                 for kinds in SdfKinds::combinations() {
                     for subgroups in [false, true] {
                         let src = shader_source_wg(
-                            &format!("{CROWD_COMMON}\n{body}"),
+                            &format!("{MANY_BODY_COMMON}\n{body}"),
                             max_patches,
                             wg,
                             per,
@@ -511,7 +515,7 @@ mod tests {
                         );
                         if let Err(e) = crate::contact::shader_tests::validate(&src, subgroups) {
                             panic!(
-                                "crowd {name}.wgsl, max_patches {max_patches}, workgroup {wg} x {per}, {kinds:?}, subgroups {subgroups}:\n{e}"
+                                "many_body {name}.wgsl, max_patches {max_patches}, workgroup {wg} x {per}, {kinds:?}, subgroups {subgroups}:\n{e}"
                             );
                         }
                     }

@@ -1,30 +1,30 @@
-// Contact generation on a many-body world's near pairs (see crowd/mod.rs): the work of
+// Contact generation on a many-body world's near pairs (see many_body/mod.rs): the work of
 // contact/generate.wgsl (generate_core.wgsl) with the jobs taken from the near-pair list instead of a fixed
-// list; the second reduction level is crowd/merge.wgsl. Prepended: contact/common.wgsl,
-// crowd/crowd_common.wgsl; appended: generate_core, sdf_sample and the analytic SDFs.
+// list; the second reduction level is many_body/merge.wgsl. Prepended: contact/common.wgsl,
+// many_body/many_body_common.wgsl; appended: generate_core, sdf_sample and the analytic SDFs.
 //
 // Layout: near pair e of world w is g = w * cap + e; its job k is g * jobs_per_pair + k, whose patches go
 // to job_patches[(g * jobs_per_pair + k) * MAX_PATCHES..] and the pair's reduced patches to
-// patches[g * MAX_PATCHES..] (merge.wgsl); counts go to crowd_meta (patch count, candidates, row offset).
+// patches[g * MAX_PATCHES..] (merge.wgsl); counts go to many_body_meta (patch count, candidates, row offset).
 
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<uniform> cp: CrowdParams;
+@group(0) @binding(1) var<uniform> cp: ManyBodyParams;
 @group(0) @binding(2) var<storage, read> tri_verts: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> sdf_values: array<u32>;
-// Bounding sphere of job k of template t at [t * jobs_per_pair + k] (CrowdFlat::job_bounds).
+// Bounding sphere of job k of template t at [t * jobs_per_pair + k] (ManyBodyFlat::job_bounds).
 @group(0) @binding(4) var<storage, read> job_bounds: array<vec4<f32>>;
 @group(1) @binding(0) var<storage, read> body_q: array<Transform>;
-@group(1) @binding(1) var<storage, read> crowd_pairs: array<Pair>;
+@group(1) @binding(1) var<storage, read> many_body_pairs: array<Pair>;
 @group(2) @binding(0) var<storage, read_write> job_patches: array<PatchOut>;
 @group(2) @binding(1) var<storage, read_write> job_patch_count: array<u32>;
-@group(2) @binding(2) var<storage, read_write> crowd_meta: array<atomic<u32>>;
+@group(2) @binding(2) var<storage, read_write> many_body_meta: array<atomic<u32>>;
 
 var<workgroup> wg_count: u32;
 
 // The world's near-pair count, uniform across the workgroup (it is read from a read-write buffer).
 fn pair_count(lid: u32, w: u32) -> u32 {
     if (lid == 0u) {
-        wg_count = atomicLoad(&crowd_meta[meta_base(w) + M_COUNT]);
+        wg_count = atomicLoad(&many_body_meta[meta_base(w) + M_COUNT]);
     }
     return workgroupUniformLoad(&wg_count);
 }
@@ -38,7 +38,7 @@ fn shape_pose(w: u32, body: u32, pos: vec4<f32>, rot: vec4<f32>) -> Transform {
 }
 
 @compute @workgroup_size(WG)
-fn crowd_generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
+fn many_body_generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
     let w = wid.z;
     let jobs = cp.jobs_per_pair;
     let e = wid.x;
@@ -48,7 +48,7 @@ fn crowd_generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
     }
     let g = w * cp.cap + e;
     let job = g * jobs + k;
-    let pair = crowd_pairs[g];
+    let pair = many_body_pairs[g];
     let world_a = shape_pose(w, pair.body_a, pair.a_pos, pair.a_rot);
     let world_b = shape_pose(w, pair.body_b, pair.b_pos, pair.b_rot);
     if (k >= pair.job_count || pair_far(pair, world_a, world_b)) {
@@ -60,7 +60,7 @@ fn crowd_generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
     // Job cull (mod.rs job_far_cpu): one sample at the centre of the job's bounding sphere stands for all
     // its triangles' culls; most of a near pair's surface is far from the other shape. Two voxels of
     // slack for a grid: trilinear interpolation can be off by up to sqrt(3)/2 of a voxel either side.
-    let bound = job_bounds[pair.crowd_template * jobs + k];
+    let bound = job_bounds[pair.many_body_template * jobs + k];
     sdf_bind(pair);
     let sc = sdf_sample(pair, xf_point(xf_mul(xf_inv(world_b), world_a), bound.xyz));
     let slack = select(2.0 * pair.sdf_origin.w, 0.0, pair.sdf_kind == 1u);
@@ -73,7 +73,7 @@ fn crowd_generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
     let first = k * cp.chunk;
     let out = generate_job(lid, pair, pair.tri_first + first, min(cp.chunk, pair.tri_count - first), world_a, world_b, job * MAX_PATCHES, true);
     if (out.y > 0u) {
-        atomicAdd(&crowd_meta[m_candidates(w) + e], out.y);
+        atomicAdd(&many_body_meta[m_candidates(w) + e], out.y);
     }
     if (lid == 0u) {
         job_patch_count[job] = out.x;
@@ -83,19 +83,19 @@ fn crowd_generate(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_
 // One invocation per world: each pair's first patch in the world's row block (the solver's rows are laid
 // out by patch), flagged when the patches exceed the budget.
 @compute @workgroup_size(64)
-fn crowd_alloc(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn many_body_alloc(@builtin(global_invocation_id) gid: vec3<u32>) {
     let w = gid.x;
     if (w >= cp.world_count) {
         return;
     }
-    let n = atomicLoad(&crowd_meta[meta_base(w) + M_COUNT]);
+    let n = atomicLoad(&many_body_meta[meta_base(w) + M_COUNT]);
     var total = 0u;
     for (var e = 0u; e < n; e++) {
-        atomicStore(&crowd_meta[m_row_first(w) + e], total);
-        total += atomicLoad(&crowd_meta[m_patch_count(w) + e]);
+        atomicStore(&many_body_meta[m_row_first(w) + e], total);
+        total += atomicLoad(&many_body_meta[m_patch_count(w) + e]);
     }
-    atomicStore(&crowd_meta[meta_base(w) + M_PATCHES], total);
+    atomicStore(&many_body_meta[meta_base(w) + M_PATCHES], total);
     if (total > cp.patch_budget) {
-        atomicOr(&crowd_meta[meta_base(w) + M_FLAGS], FLAG_PATCHES);
+        atomicOr(&many_body_meta[meta_base(w) + M_FLAGS], FLAG_PATCHES);
     }
 }

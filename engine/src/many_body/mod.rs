@@ -7,7 +7,7 @@
 //! 1. **Near pairs** (`near.wgsl`): for every body, the bodies and static shapes whose bounding spheres
 //!    come within the contact offset (a plane tests the sphere against its half-space), counted per
 //!    body, prefix-summed and written as a compact list sorted by (body a, body b), each entry a
-//!    [`PairGpu`] copied from the pair's template ([`CrowdModel`]) with its bodies filled in. The order
+//!    [`PairGpu`] copied from the pair's template ([`ManyBodyModel`]) with its bodies filled in. The order
 //!    does not depend on thread timing, so frames are bitwise reproducible.
 //! 2. **Contacts** (`contacts.wgsl`): generation and the two-level reduction of
 //!    [`crate::contact`] on the near pairs (indirect dispatches sized by the list).
@@ -23,17 +23,17 @@
 //!    sequential Gauss-Seidel sweep over the pairs sorted by colour, which is what the CPU twin runs
 //!    ([`crate::solver::step_cpu`] on the pairs in that order). Warm starting across frames finds last
 //!    frame's entry of the same body pair by binary search in last frame's sorted keys.
-//! 5. **Sleeping** ([`CrowdConfig::sleep`], off unless set): a pile settles but a few bodies may never
+//! 5. **Sleeping** ([`ManyBodyConfig::sleep`], off unless set): a pile settles but a few bodies may never
 //!    quite stop (docs/BENCHMARKS.md: a nut rocking between two poses 0.7 mm apart for good, floor nuts
 //!    creeping under leaning neighbours). As in PhysX, Bullet and rapier, a body that has stayed put long
-//!    enough is taken out of the dynamics: after the last substep (`crowd_sleep`) each awake dynamic body
+//!    enough is taken out of the dynamics: after the last substep (`many_body_sleep`) each awake dynamic body
 //!    compares its centre of mass and rotation with a reference pose; within [`SleepConfig::distance`] and
 //!    [`SleepConfig::angle`] its count of still frames grows, else the reference becomes the current pose
 //!    and the count restarts at one (the body *moved* this frame). At more than [`SleepConfig::frames`]
 //!    a dynamic body falls asleep (a kinematic one never does, but standing still it wakes nobody): its
 //!    velocity is set to zero, and from then on it takes no gravity and no impulses and is not integrated
 //!    (the solver sees an infinitely heavy body, as a static one). Before contact generation
-//!    (`crowd_wake`), every near pair (bounding spheres within the contact offset, 1.) of a sleeping body
+//!    (`many_body_wake`), every near pair (bounding spheres within the contact offset, 1.) of a sleeping body
 //!    and a body that moved last frame wakes the sleeper; it counts as one frame still with its old
 //!    reference, so it wakes its own neighbours only if it is then pushed out of its bounds. Then a pair
 //!    whose bodies all sleep (or a sleeper and a static shape) gets no jobs (`near_dormant`): no contacts,
@@ -42,21 +42,21 @@
 //!    vec4 per body at the end of the solver scratch (reference centre of mass and count, reference
 //!    rotation); uploading a state or resetting a world wakes its bodies.
 //!
-//! A world whose near pairs exceed [`CrowdConfig::max_pairs`], whose colouring needs more than
-//! [`CrowdConfig::max_colours`] colours or more than [`CrowdConfig::colour_rounds`] rounds, or whose
-//! patches exceed [`CrowdConfig::max_patches_per_world`] is flagged and left as it was for that frame
-//! (never stepped with contacts missing); [`CrowdFrame::flags`] says which.
+//! A world whose near pairs exceed [`ManyBodyConfig::max_pairs`], whose colouring needs more than
+//! [`ManyBodyConfig::max_colours`] colours or more than [`ManyBodyConfig::colour_rounds`] rounds, or whose
+//! patches exceed [`ManyBodyConfig::max_patches_per_world`] is flagged and left as it was for that frame
+//! (never stepped with contacts missing); [`ManyBodyFrame::flags`] says which.
 
 pub mod gpu;
 
-use crate::contact::generate::{pair_far_cpu, sdf_sample_cpu, shape_world, Xf};
+use crate::contact::generate::{pair_far_cpu, sdf_sample_cpu, shape_world, RigidTransform};
 use crate::contact::model::{FlatModel, JobGpu, PairGpu, NO_BODY};
 use crate::contact::{contacts_cpu, ContactConfig, ContactModel, PairSpec, QueryShape};
 use crate::error::{EngineError, Result};
 use crate::solver::{step_cpu, BodyModel, BodyState, Control, SolverConfig, WarmStart};
 use glam::Vec3;
 
-/// Query triangles per job on a crowd (see CrowdFlat::new).
+/// Query triangles per job in a many-body world (see ManyBodyFlat::new).
 const CHUNK: u32 = 256;
 /// No template for a pair of classes (the pair never collides).
 pub const NO_RULE: u32 = u32::MAX;
@@ -68,13 +68,13 @@ const UNCOLOURED: u32 = u32::MAX;
 /// Colour index of a pair that found no free colour below `max_colours`.
 const COLOUR_NONE: u32 = 255;
 
-/// [`CrowdFrame::flags`]: more near pairs than [`CrowdConfig::max_pairs`].
+/// [`ManyBodyFrame::flags`]: more near pairs than [`ManyBodyConfig::max_pairs`].
 pub const FLAG_PAIRS: u32 = 1;
-/// A pair needed a colour beyond [`CrowdConfig::max_colours`].
+/// A pair needed a colour beyond [`ManyBodyConfig::max_colours`].
 pub const FLAG_COLOURS: u32 = 2;
-/// Pairs still uncoloured after [`CrowdConfig::colour_rounds`] rounds and the serial completion's budget.
+/// Pairs still uncoloured after [`ManyBodyConfig::colour_rounds`] rounds and the serial completion's budget.
 pub const FLAG_ROUNDS: u32 = 4;
-/// More patches than [`CrowdConfig::max_patches_per_world`] (raised only for a world coloured in full).
+/// More patches than [`ManyBodyConfig::max_patches_per_world`] (raised only for a world coloured in full).
 pub const FLAG_PATCHES: u32 = 8;
 /// The near test gave another answer when the list was written than when it was counted (GPU only:
 /// floating-point contraction differing between kernels; the world's list would have a gap).
@@ -83,7 +83,7 @@ pub const FLAG_RECOUNT: u32 = 16;
 /// The shapes of a many-body world: each body has a shape class, and a template pair per pair of
 /// classes (and per static shape and class) says how two such shapes collide.
 #[derive(Clone, Debug)]
-pub struct CrowdModel {
+pub struct ManyBodyModel {
     /// Bodies per world.
     pub body_count: u32,
     /// Shape class of each body, shape [body_count].
@@ -101,14 +101,14 @@ pub struct CrowdModel {
     pub static_count: u32,
 }
 
-impl CrowdModel {
+impl ManyBodyModel {
     /// `body_count` bodies of one part: every two collide by `body_pair`, and each collides with each of
     /// `statics` (templates whose SDF shape is fixed in the world).
     pub fn uniform(body_count: u32, body_pair: PairSpec, statics: Vec<PairSpec>) -> Self {
         let static_count = statics.len() as u32;
         let mut templates = vec![body_pair];
         templates.extend(statics);
-        CrowdModel {
+        ManyBodyModel {
             body_count,
             body_class: vec![0; body_count as usize],
             class_count: 1,
@@ -154,7 +154,7 @@ impl CrowdModel {
             ("static_rule", &self.static_rule, self.static_count * self.class_count),
         ] {
             if table.len() != len as usize {
-                return bad(field, format!("{} entries", table.len()), format!("{len} (see CrowdModel)"));
+                return bad(field, format!("{} entries", table.len()), format!("{len} (see ManyBodyModel)"));
             }
             if let Some(t) = table.iter().find(|&&t| t != NO_RULE && t >= n_t) {
                 return bad(field, t.to_string(), format!("a template index below {n_t} or NO_RULE"));
@@ -179,7 +179,7 @@ impl CrowdModel {
 
 /// Capacities of a many-body world (per world).
 #[derive(Clone, Debug, PartialEq)]
-pub struct CrowdConfig {
+pub struct ManyBodyConfig {
     /// Near pairs (body-body and body-static) a world may hold.
     pub max_pairs: u32,
     /// Colours the solver may use (at most 32; a body with d near pairs needs at least d).
@@ -228,11 +228,11 @@ impl Default for SleepConfig {
     }
 }
 
-impl CrowdConfig {
+impl ManyBodyConfig {
     /// Room for `bodies` bodies with about 10 near pairs each (at most 10000) and 8 patches per pair.
     pub fn for_bodies(bodies: u32) -> Self {
         let max_pairs = (10 * bodies).clamp(64, 10_000);
-        CrowdConfig {
+        ManyBodyConfig {
             max_pairs,
             max_colours: 32,
             colour_rounds: 64,
@@ -295,7 +295,7 @@ pub const STATIC_KEY: u32 = 0xffff_0000;
 
 /// What one frame of one world did before its solve.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct CrowdFrame {
+pub struct ManyBodyFrame {
     /// Near pairs in list order (sorted by (a, b)).
     pub pairs: Vec<NearPair>,
     /// Colour of each near pair (its index; 255: none found).
@@ -320,8 +320,8 @@ pub fn priority(a: u32, b: u32) -> u32 {
 
 /// The templates and tables the kernels read, and the CPU twin's copy of them.
 #[derive(Clone, Debug)]
-pub struct CrowdFlat {
-    pub model: CrowdModel,
+pub struct ManyBodyFlat {
+    pub model: ManyBodyModel,
     /// Flattened templates (pairs, jobs, triangles, SDF values).
     pub flat: FlatModel,
     /// Triangles per job.
@@ -360,7 +360,13 @@ fn spatial_order(q: &QueryShape) -> QueryShape {
 /// (contacts.wgsl's job cull): the SDF at the centre of the job's bounding sphere, less its radius, the
 /// query radius and the grid's interpolation slack (two voxels: trilinear interpolation can be off by up to
 /// sqrt(3)/2 of a voxel either side of the 1-Lipschitz field) is beyond the contact offset.
-pub fn job_far_cpu(pair: &PairGpu, sdf_values: &[u32], bound: [f32; 4], world_a: &Xf, world_b: &Xf) -> bool {
+pub fn job_far_cpu(
+    pair: &PairGpu,
+    sdf_values: &[u32],
+    bound: [f32; 4],
+    world_a: &RigidTransform,
+    world_b: &RigidTransform,
+) -> bool {
     if bound[3] < 0.0 {
         return true;
     }
@@ -370,8 +376,8 @@ pub fn job_far_cpu(pair: &PairGpu, sdf_values: &[u32], bound: [f32; 4], world_a:
     d - bound[3] - slack > pair.contact_offset
 }
 
-impl CrowdFlat {
-    pub fn new(model: &CrowdModel, contact: &ContactConfig) -> Result<Self> {
+impl ManyBodyFlat {
+    pub fn new(model: &ManyBodyModel, contact: &ContactConfig) -> Result<Self> {
         model.validate()?;
         contact.validate()?;
         let longest = model.templates.iter().map(|p| p.query.triangles.len() as u32).max().unwrap_or(0);
@@ -414,7 +420,7 @@ impl CrowdFlat {
                 job_bounds[ti * jobs_per_pair as usize + k as usize] = [c.x, c.y, c.z, (r + p.radius) * (1.0 + 1e-5)];
             }
         }
-        Ok(CrowdFlat { model, flat, chunk, jobs_per_pair, job_bounds })
+        Ok(ManyBodyFlat { model, flat, chunk, jobs_per_pair, job_bounds })
     }
 
     fn class(&self, body: u32) -> u32 {
@@ -423,7 +429,7 @@ impl CrowdFlat {
 
     /// The near pairs of world `world` at poses `body_q` (all worlds), in list order, and whether more than
     /// `max_pairs` were near (the list is then cut at `max_pairs`).
-    pub fn near_pairs(&self, body_q: &[Xf], world: u32, max_pairs: u32) -> (Vec<NearPair>, bool) {
+    pub fn near_pairs(&self, body_q: &[RigidTransform], world: u32, max_pairs: u32) -> (Vec<NearPair>, bool) {
         let m = &self.model;
         let n = m.body_count;
         let mut out = Vec::new();
@@ -448,7 +454,7 @@ impl CrowdFlat {
         (out, total > max_pairs)
     }
 
-    fn near(&self, t: u32, a: u32, b: u32, body_q: &[Xf], world: u32) -> bool {
+    fn near(&self, t: u32, a: u32, b: u32, body_q: &[RigidTransform], world: u32) -> bool {
         let p = &self.flat.pairs[t as usize];
         let n = self.model.body_count;
         let wa = shape_world(body_q, n, world, a, p.a_pos, p.a_rot);
@@ -459,7 +465,7 @@ impl CrowdFlat {
     /// The near pair's record: its template with its bodies filled in (near.wgsl's `near_emit`).
     pub fn pair_record(&self, np: &NearPair) -> PairGpu {
         let mut p = PairGpu { body_a: np.a, body_b: np.b, job_first: np.key, ..self.flat.pairs[np.template as usize] };
-        p.crowd_template = np.template;
+        p.many_body_template = np.template;
         p
     }
 }
@@ -546,13 +552,13 @@ pub fn colour_pairs(pairs: &[NearPair], body_count: u32, max_colours: u32, round
     (colours, count, flags)
 }
 
-/// The CPU reference of [`gpu::CrowdPipeline`]: the same near pairs, colours, contacts and a Gauss-Seidel
+/// The CPU reference of [`gpu::ManyBodyPipeline`]: the same near pairs, colours, contacts and a Gauss-Seidel
 /// step over the pairs in colour order, world by world.
 /// (A pipeline whose per-job patches would not fit one binding lengthens its jobs; its twin then takes
 /// `ContactConfig { chunk_triangles: pipeline.flat.chunk, .. }`.)
-pub struct CrowdCpu {
-    pub flat: CrowdFlat,
-    pub cfg: CrowdConfig,
+pub struct ManyBodyCpu {
+    pub flat: ManyBodyFlat,
+    pub cfg: ManyBodyConfig,
     pub contact: ContactConfig,
     pub solver: SolverConfig,
     pub bodies: BodyModel,
@@ -564,23 +570,23 @@ pub struct CrowdCpu {
     world_flat: FlatModel,
 }
 
-impl CrowdCpu {
+impl ManyBodyCpu {
     pub fn new(
-        model: &CrowdModel,
+        model: &ManyBodyModel,
         bodies: &BodyModel,
-        cfg: &CrowdConfig,
+        cfg: &ManyBodyConfig,
         contact: &ContactConfig,
         solver: &SolverConfig,
     ) -> Result<Self> {
         check_setup(model, bodies, cfg, solver)?;
-        let flat = CrowdFlat::new(model, contact)?;
+        let flat = ManyBodyFlat::new(model, contact)?;
         let world_flat = FlatModel {
             pairs: Vec::new(),
             jobs: Vec::new(),
             tri_verts: flat.flat.tri_verts.clone(),
             sdf_values: flat.flat.sdf_values.clone(),
         };
-        Ok(CrowdCpu {
+        Ok(ManyBodyCpu {
             flat,
             cfg: cfg.clone(),
             contact: contact.clone(),
@@ -598,7 +604,7 @@ impl CrowdCpu {
         self.rest.clear();
     }
 
-    /// Forgets world `world`'s warm-start impulses (the twin of [`gpu::CrowdPipeline::reset_world`]; the
+    /// Forgets world `world`'s warm-start impulses (the twin of [`gpu::ManyBodyPipeline::reset_world`]; the
     /// caller writes the world's new state).
     pub fn reset_world(&mut self, world: usize) {
         if let Some(w) = self.warm.get_mut(world) {
@@ -612,12 +618,12 @@ impl CrowdCpu {
 
     /// Steps every world of `state` by one frame; returns per world the frame's pairs, colours and flags,
     /// and whether the world is ok (stepped, finite, below max_speed).
-    pub fn step(&mut self, state: &mut BodyState, control: &Control) -> Vec<(CrowdFrame, bool)> {
+    pub fn step(&mut self, state: &mut BodyState, control: &Control) -> Vec<(ManyBodyFrame, bool)> {
         let n = self.flat.model.body_count as usize;
         let world_count = state.body_q.len() / n;
         self.warm.resize_with(world_count, Default::default);
         self.rest.resize(world_count * n, RestState::default());
-        let xf: Vec<Xf> = state.body_q.iter().map(|t| t.xf()).collect();
+        let xf: Vec<RigidTransform> = state.body_q.iter().map(|t| t.xf()).collect();
         let mut out = Vec::with_capacity(world_count);
         for w in 0..world_count {
             let (pairs, over) = self.flat.near_pairs(&xf, w as u32, self.cfg.max_pairs);
@@ -641,7 +647,7 @@ impl CrowdCpu {
                     wake_by(rest, np.b as usize, np.a as usize, &sleep);
                 }
             }
-            let mut frame = CrowdFrame { pairs, colours, colour_count, flags };
+            let mut frame = ManyBodyFrame { pairs, colours, colour_count, flags };
             if frame.flags != 0 {
                 // Not stepped (as on the GPU): no contacts, and no warm start for next frame.
                 self.warm[w] = Default::default();
@@ -676,7 +682,7 @@ impl CrowdCpu {
                 self.world_flat.pairs.push(PairGpu { job_first, job_count, ..record });
             }
             let range = w * n..(w + 1) * n;
-            // The crowd kernels merge every near pair's jobs (crowd/merge.wgsl), one job or several.
+            // The many-body kernels merge every near pair's jobs (many_body/merge.wgsl), one job or several.
             let contacts =
                 contacts_cpu(&self.world_flat, n as u32, 1, &state.body_q[range.clone()], &self.contact, true);
             let patches: usize = contacts.patches.iter().map(|p| p.len()).sum();
@@ -762,7 +768,7 @@ impl RestState {
 
     /// The end-of-frame update of a dynamic or kinematic body at pose `q` with centre of mass `com_local`
     /// (body frame); a body falling asleep has its velocity `qd` zeroed; a kinematic body never sleeps
-    /// (solve.wgsl's crowd_sleep).
+    /// (solve.wgsl's many_body_sleep).
     pub fn update(
         &mut self,
         q: &crate::contact::TransformGpu,
@@ -793,7 +799,7 @@ impl RestState {
     }
 }
 
-/// `rest[a]` wakes if it sleeps and `rest[b]` moved last frame (solve.wgsl's crowd_wake): it counts as one
+/// `rest[a]` wakes if it sleeps and `rest[b]` moved last frame (solve.wgsl's many_body_wake): it counts as one
 /// frame still with its old reference.
 fn wake_by(rest: &mut [RestState], a: usize, b: usize, sleep: &SleepConfig) {
     if rest[a].asleep(sleep) && rest[b].moved() {
@@ -802,11 +808,11 @@ fn wake_by(rest: &mut [RestState], a: usize, b: usize, sleep: &SleepConfig) {
 }
 
 /// The checks the GPU pipeline and the CPU twin both make on their settings (the models are checked by
-/// CrowdFlat::new).
+/// ManyBodyFlat::new).
 pub(crate) fn check_setup(
-    model: &CrowdModel,
+    model: &ManyBodyModel,
     bodies: &BodyModel,
-    cfg: &CrowdConfig,
+    cfg: &ManyBodyConfig,
     solver: &SolverConfig,
 ) -> Result<()> {
     cfg.validate()?;
@@ -816,7 +822,7 @@ pub(crate) fn check_setup(
         return Err(EngineError::Config {
             field: "body_count",
             value: bodies.body_count().to_string(),
-            expected: format!("the crowd model's {} bodies", model.body_count),
+            expected: format!("the many-body model's {} bodies", model.body_count),
         });
     }
     Ok(())

@@ -1,21 +1,21 @@
-// Near pairs and their graph colouring for many-body worlds (see crowd/mod.rs for the method). Prepended:
-// contact/common.wgsl and crowd/crowd_common.wgsl. Dispatches, in order, per frame: keep_keys, near_count,
-// near_scan, near_emit, incidence, colour_round x CrowdConfig::colour_rounds, colour_sort.
+// Near pairs and their graph colouring for many-body worlds (see many_body/mod.rs for the method). Prepended:
+// contact/common.wgsl and many_body/many_body_common.wgsl. Dispatches, in order, per frame: keep_keys, near_count,
+// near_scan, near_emit, incidence, colour_round x ManyBodyConfig::colour_rounds, colour_sort.
 //
-// Crowd pairs: a near pair's record is its template's Pair with body_a, body_b filled in, and job_first
+// Many-body pairs: a near pair's record is its template's Pair with body_a, body_b filled in, and job_first
 // holding its sort key for body b (body b's index; 0xffff0000 + s for static shape s), so that the list,
-// sorted by (body_a, key), can be searched for a pair of bodies; crowd_template holds its template.
+// sorted by (body_a, key), can be searched for a pair of bodies; many_body_template holds its template.
 
-@group(0) @binding(0) var<uniform> cp: CrowdParams;
+@group(0) @binding(0) var<uniform> cp: ManyBodyParams;
 @group(0) @binding(1) var<storage, read> templates: array<Pair>;
 // body_class [body_count], body_rule [class_count^2], static_rule [static_count * class_count].
 @group(0) @binding(2) var<storage, read> rules: array<u32>;
 @group(1) @binding(0) var<storage, read> body_q: array<Transform>;
 // The solver scratch, read for the sleeping state only (solve.wgsl rest_index).
 @group(1) @binding(1) var<storage, read> solver_scratch: array<vec4<f32>>;
-@group(2) @binding(0) var<storage, read_write> crowd_pairs: array<Pair>;
-@group(2) @binding(1) var<storage, read_write> crowd_meta: array<atomic<u32>>;
-@group(2) @binding(2) var<storage, read_write> crowd_args: array<atomic<u32>>;
+@group(2) @binding(0) var<storage, read_write> many_body_pairs: array<Pair>;
+@group(2) @binding(1) var<storage, read_write> many_body_meta: array<atomic<u32>>;
+@group(2) @binding(2) var<storage, read_write> many_body_args: array<atomic<u32>>;
 @group(3) @binding(0) var<uniform> pp: PassParams;
 
 const STATIC_KEY: u32 = 0xffff0000u;
@@ -49,11 +49,11 @@ fn near(t: u32, a: u32, b: u32, w: u32) -> bool {
 }
 
 fn load(i: u32) -> u32 {
-    return atomicLoad(&crowd_meta[i]);
+    return atomicLoad(&many_body_meta[i]);
 }
 
 fn store(i: u32, v: u32) {
-    atomicStore(&crowd_meta[i], v);
+    atomicStore(&many_body_meta[i], v);
 }
 
 // Last frame's sorted keys and row offsets, before the list is rebuilt.
@@ -70,8 +70,8 @@ fn keep_keys(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     if (e < n) {
         let g = w * cp.cap + e;
-        store(m_old_a(w) + e, crowd_pairs[g].body_a);
-        store(m_old_b(w) + e, crowd_pairs[g].job_first);
+        store(m_old_a(w) + e, many_body_pairs[g].body_a);
+        store(m_old_b(w) + e, many_body_pairs[g].job_first);
         store(m_old_row_first(w) + e, load(m_row_first(w) + e));
     }
 }
@@ -110,9 +110,9 @@ fn near_count(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 // Indirect dispatch arguments at slot a: x workgroups (the most any world needs) by world_count by 1.
 fn set_args(a: u32, x: u32) {
-    atomicMax(&crowd_args[a], x);
-    atomicMax(&crowd_args[a + 1u], cp.world_count);
-    atomicMax(&crowd_args[a + 2u], 1u);
+    atomicMax(&many_body_args[a], x);
+    atomicMax(&many_body_args[a + 1u], cp.world_count);
+    atomicMax(&many_body_args[a + 2u], 1u);
 }
 
 var<workgroup> scan_a: array<u32, 256>;
@@ -168,9 +168,9 @@ fn near_scan(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) w
         store(meta_base(w) + M_FLAGS, select(0u, FLAG_PAIRS, total > cp.cap));
         set_args(A_PAIRS, (count + 63u) / 64u);
         // Generation: near pair x job x world.
-        atomicMax(&crowd_args[A_GENERATE], count);
-        atomicMax(&crowd_args[A_GENERATE + 1u], cp.jobs_per_pair);
-        atomicMax(&crowd_args[A_GENERATE + 2u], cp.world_count);
+        atomicMax(&many_body_args[A_GENERATE], count);
+        atomicMax(&many_body_args[A_GENERATE + 1u], cp.jobs_per_pair);
+        atomicMax(&many_body_args[A_GENERATE + 2u], cp.world_count);
         set_args(A_MERGE, count);
     }
 }
@@ -181,8 +181,8 @@ fn emit(w: u32, k: u32, end: u32, t: u32, a: u32, b: u32, key: u32) {
         p.body_a = a;
         p.body_b = b;
         p.job_first = key;
-        p.crowd_template = t;
-        crowd_pairs[w * cp.cap + k] = p;
+        p.many_body_template = t;
+        many_body_pairs[w * cp.cap + k] = p;
         store(m_colour(w) + k, UNCOLOURED);
         store(m_candidates(w) + k, 0u);
         store(m_patch_count(w) + k, 0u);
@@ -218,11 +218,11 @@ fn near_emit(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     if (k != end) {
-        atomicOr(&crowd_meta[meta_base(w) + M_FLAGS], FLAG_RECOUNT);
+        atomicOr(&many_body_meta[meta_base(w) + M_FLAGS], FLAG_RECOUNT);
     }
 }
 
-// Sleeping (crowd/mod.rs, 5.; dispatched after solve.wgsl's crowd_wake): a near pair whose bodies all sleep
+// Sleeping (many_body/mod.rs, 5.; dispatched after solve.wgsl's many_body_wake): a near pair whose bodies all sleep
 // (or whose one body sleeps beside a static shape) gets no jobs this frame, so no contacts and no rows: its
 // bodies take no impulses anyway.
 @compute @workgroup_size(64)
@@ -233,10 +233,10 @@ fn near_dormant(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let g = w * cp.cap + e;
-    let a = crowd_pairs[g].body_a;
-    let b = crowd_pairs[g].body_b;
+    let a = many_body_pairs[g].body_a;
+    let b = many_body_pairs[g].body_b;
     if (asleep(w, a) && (b == NONE || asleep(w, b))) {
-        crowd_pairs[g].job_count = 0u;
+        many_body_pairs[g].job_count = 0u;
     }
 }
 
@@ -254,13 +254,13 @@ fn find_pair(w: u32, i: u32, j: u32) -> u32 {
             break;
         }
         let mid = (lo + hi) / 2u;
-        if (crowd_pairs[w * cp.cap + mid].job_first < j) {
+        if (many_body_pairs[w * cp.cap + mid].job_first < j) {
             lo = mid + 1u;
         } else {
             hi = mid;
         }
     }
-    if (lo < n && crowd_pairs[w * cp.cap + lo].body_a == i && crowd_pairs[w * cp.cap + lo].job_first == j) {
+    if (lo < n && many_body_pairs[w * cp.cap + lo].body_a == i && many_body_pairs[w * cp.cap + lo].job_first == j) {
         return lo;
     }
     return NONE;
@@ -288,7 +288,7 @@ fn incidence(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     if (k != end) {
-        atomicOr(&crowd_meta[meta_base(w) + M_FLAGS], FLAG_RECOUNT);
+        atomicOr(&many_body_meta[meta_base(w) + M_FLAGS], FLAG_RECOUNT);
     }
 }
 
@@ -313,7 +313,7 @@ fn neighbour(w: u32, f: u32, e: u32, pe: u32, r: u32) -> vec2<u32> {
     }
     if (v == UNCOLOURED || (v >> 8u) == r) {
         let g = w * cp.cap + f;
-        let pf = priority(crowd_pairs[g].body_a, crowd_pairs[g].body_b);
+        let pf = priority(many_body_pairs[g].body_a, many_body_pairs[g].body_b);
         return vec2<u32>(select(0u, 1u, pf > pe || (pf == pe && f > e)), 0u);
     }
     let c = v & 0xffu;
@@ -366,8 +366,8 @@ fn colour_round(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let g = w * cp.cap + e;
-    let a = crowd_pairs[g].body_a;
-    let b = crowd_pairs[g].body_b;
+    let a = many_body_pairs[g].body_a;
+    let b = many_body_pairs[g].body_b;
     let pe = priority(a, b);
     let sa = scan_body(w, a, e, pe, r);
     if (sa.x != 0u) {
@@ -383,7 +383,7 @@ fn colour_round(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let c = countTrailingZeros(~used);
     if (c >= cp.max_colours) {
-        atomicOr(&crowd_meta[meta_base(w) + M_FLAGS], FLAG_COLOURS);
+        atomicOr(&many_body_meta[meta_base(w) + M_FLAGS], FLAG_COLOURS);
         store(m_colour(w) + e, (r << 8u) | COLOUR_NONE);
     } else {
         store(m_colour(w) + e, (r << 8u) | c);
@@ -409,8 +409,8 @@ fn colour_sort(@builtin(global_invocation_id) gid: vec3<u32>) {
                 continue;
             }
             let g = w * cp.cap + e;
-            let a = crowd_pairs[g].body_a;
-            let b = crowd_pairs[g].body_b;
+            let a = many_body_pairs[g].body_a;
+            let b = many_body_pairs[g].body_b;
             // Its neighbours, plus the 4 loop exits of its two scans.
             var cost = 4u + load(m_count_a(w) + a) + load(m_count_b(w) + a);
             if (b != NONE) {
@@ -426,7 +426,7 @@ fn colour_sort(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             let c = countTrailingZeros(~used);
             if (c >= cp.max_colours) {
-                atomicOr(&crowd_meta[meta_base(w) + M_FLAGS], FLAG_COLOURS);
+                atomicOr(&many_body_meta[meta_base(w) + M_FLAGS], FLAG_COLOURS);
                 store(m_colour(w) + e, COLOUR_NONE);
             } else {
                 store(m_colour(w) + e, c);

@@ -1,13 +1,15 @@
-//! Many bodies in one world (`factory_engine::crowd`): the near-pair list and its colouring against the
+//! Many bodies in one world (`factory_engine::many_body`): the near-pair list and its colouring against the
 //! CPU twin and against their definitions, the coloured Gauss-Seidel step against the CPU twin (a
 //! sequential sweep in colour order), bitwise determinism, and a world over its capacity flagged and left
 //! as it was while the other worlds step as if alone.
 
 use factory_engine::contact::roles::{pair_spec, ShapeDesc, ShapeGeometry};
 use factory_engine::contact::{ContactConfig, PairSpec, TransformGpu, NO_BODY};
-use factory_engine::crowd::gpu::CrowdPipeline;
-use factory_engine::crowd::{colour_pairs, CrowdConfig, CrowdCpu, CrowdFlat, CrowdModel, SleepConfig, FLAG_PAIRS};
 use factory_engine::gpu::GpuContext;
+use factory_engine::many_body::gpu::ManyBodyPipeline;
+use factory_engine::many_body::{
+    colour_pairs, ManyBodyConfig, ManyBodyCpu, ManyBodyFlat, ManyBodyModel, SleepConfig, FLAG_PAIRS,
+};
 use factory_engine::rng::SplitMix64;
 use factory_engine::sdf::cache::SdfCache;
 use factory_engine::solver::{BodyModel, BodyState, Control, SolverConfig};
@@ -37,7 +39,7 @@ fn gpu() -> &'static GpuContext {
     GpuContext::global().unwrap()
 }
 
-fn box_model(n: u32, mu: f32) -> (CrowdModel, BodyModel) {
+fn box_model(n: u32, mu: f32) -> (ManyBodyModel, BodyModel) {
     let cache = SdfCache::new(SdfCache::default_dir());
     let a = ShapeDesc::new(0, ShapeGeometry::Box { half_extents: H });
     let b = ShapeDesc::new(1, ShapeGeometry::Box { half_extents: H });
@@ -57,7 +59,7 @@ fn box_model(n: u32, mu: f32) -> (CrowdModel, BodyModel) {
     for _ in 0..n {
         bodies.add_dynamic(mass, inertia, Vec3::ZERO);
     }
-    (CrowdModel::uniform(n, body_pair, vec![ground]), bodies)
+    (ManyBodyModel::uniform(n, body_pair, vec![ground]), bodies)
 }
 
 /// `n` boxes at random poses in a column of side `side` [m] above the table, some overlapping.
@@ -87,10 +89,10 @@ fn max_distance(a: &BodyState, b: &BodyState) -> f32 {
 
 #[test]
 fn near_pairs_and_colours_match_the_cpu_twin_and_colour_properly() {
-    near_pairs_and_colours(CrowdConfig::for_bodies(40).colour_rounds);
+    near_pairs_and_colours(ManyBodyConfig::for_bodies(40).colour_rounds);
 }
 
-/// Two rounds colour only part of a crowded world: the serial completion colours the rest, alike on the
+/// Two rounds colour only part of a dense world: the serial completion colours the rest, alike on the
 /// GPU and in the CPU twin, still properly.
 #[test]
 fn pairs_the_rounds_leave_uncoloured_are_coloured_serially_alike() {
@@ -100,23 +102,23 @@ fn pairs_the_rounds_leave_uncoloured_are_coloured_serially_alike() {
 fn near_pairs_and_colours(rounds: u32) {
     let n = 40;
     let (model, bodies) = box_model(n, 0.5);
-    let cfg = CrowdConfig { colour_rounds: rounds, ..CrowdConfig::for_bodies(n) };
+    let cfg = ManyBodyConfig { colour_rounds: rounds, ..ManyBodyConfig::for_bodies(n) };
     let contact = ContactConfig { max_patches: 16, ..Default::default() };
     let solver = SolverConfig::default();
     let worlds = 2;
-    let pipe = CrowdPipeline::new(gpu(), &model, &bodies, worlds, &cfg, &contact, &solver).unwrap();
+    let pipe = ManyBodyPipeline::new(gpu(), &model, &bodies, worlds, &cfg, &contact, &solver).unwrap();
     let mut q = jumble(n, 0.12, 3);
     q.extend(jumble(n, 0.2, 4));
     pipe.write_state(gpu(), &at_rest(q.clone()));
     pipe.submit_frame(gpu());
     let frames = pipe.read_frames(gpu());
-    let flat = CrowdFlat::new(&model, &contact).unwrap();
+    let flat = ManyBodyFlat::new(&model, &contact).unwrap();
     let xf: Vec<_> = q.iter().map(|t| t.xf()).collect();
     for (w, f) in frames.iter().enumerate() {
         let (pairs, over) = flat.near_pairs(&xf, w as u32, cfg.max_pairs);
         assert!(!over);
         assert_eq!(f.pairs, pairs, "world {w}: near pairs, GPU vs CPU twin");
-        assert!(pairs.iter().filter(|p| p.b != NO_BODY).count() > 2 * n as usize / 3, "world {w}: a crowded world");
+        assert!(pairs.iter().filter(|p| p.b != NO_BODY).count() > 2 * n as usize / 3, "world {w}: a dense world");
         let (colours, count, flags) = colour_pairs(&pairs, n, cfg.max_colours, cfg.colour_rounds);
         assert_eq!(f.flags, flags, "world {w}: flags");
         assert_eq!(flags, 0, "world {w}: coloured within {} colours and {} rounds", cfg.max_colours, cfg.colour_rounds);
@@ -162,7 +164,7 @@ fn near_pairs_and_colours(rounds: u32) {
 }
 
 /// Boxes falling onto the table and each other, stepped by the GPU and by the CPU twin from the same start.
-fn falling_boxes(n: u32) -> (CrowdModel, BodyModel, BodyState) {
+fn falling_boxes(n: u32) -> (ManyBodyModel, BodyModel, BodyState) {
     let (model, bodies) = box_model(n, 0.5);
     // A loose jumble (some overlap) 2-10 cm up: they land within the 20 frames.
     (model, bodies, at_rest(jumble(n, 0.08, 11)))
@@ -178,7 +180,7 @@ const RESTING: u32 = 30;
 /// the GPU and the CPU twin part ways, 1e-8 m becoming 5e-5 m within 3 frames (measured), so the
 /// CPU twin is re-synchronised to the GPU's poses every frame: landing frames cold on both sides, resting
 /// frames warm-started, each side from its own rows (see PARITY_WARM_TOL).
-fn stacked_boxes() -> (CrowdModel, BodyModel, BodyState) {
+fn stacked_boxes() -> (ManyBodyModel, BodyModel, BodyState) {
     let (model, bodies) = box_model(12, 0.5);
     let mut q = Vec::new();
     for layer in 0..2 {
@@ -198,15 +200,15 @@ fn stacked_boxes() -> (CrowdModel, BodyModel, BodyState) {
 /// One world on the GPU, started at `start`, and its CPU twin, at the parity tests' settings (16 patches per
 /// pair, 16 position iterations).
 fn pipe_and_twin(
-    model: &CrowdModel,
+    model: &ManyBodyModel,
     bodies: &BodyModel,
-    cfg: &CrowdConfig,
+    cfg: &ManyBodyConfig,
     start: &BodyState,
-) -> (CrowdPipeline, CrowdCpu) {
+) -> (ManyBodyPipeline, ManyBodyCpu) {
     let contact = ContactConfig { max_patches: 16, ..Default::default() };
     let solver = SolverConfig { pos_iters: 16, ..Default::default() };
-    let pipe = CrowdPipeline::new(gpu(), model, bodies, 1, cfg, &contact, &solver).unwrap();
-    let cpu = CrowdCpu::new(model, bodies, cfg, &contact, &solver).unwrap();
+    let pipe = ManyBodyPipeline::new(gpu(), model, bodies, 1, cfg, &contact, &solver).unwrap();
+    let cpu = ManyBodyCpu::new(model, bodies, cfg, &contact, &solver).unwrap();
     pipe.write_state(gpu(), start);
     (pipe, cpu)
 }
@@ -214,7 +216,7 @@ fn pipe_and_twin(
 #[test]
 fn coloured_gpu_step_matches_the_cpu_twin() {
     let (model, bodies, start) = stacked_boxes();
-    let cfg = CrowdConfig::for_bodies(12);
+    let cfg = ManyBodyConfig::for_bodies(12);
     let (pipe, mut cpu) = pipe_and_twin(&model, &bodies, &cfg, &start);
     let mut state = start.clone();
     let (mut touching, mut cold, mut warm) = (0, Vec::new(), Vec::new());
@@ -264,7 +266,7 @@ fn coloured_gpu_step_matches_the_cpu_twin() {
     assert!(touching >= 12, "the boxes rest on the table and on each other ({touching} pairs touching)");
     // Warm starting is at work: the same frame stepped cold from the same state ends elsewhere.
     let (now, _) = pipe.read_state(gpu());
-    let fresh = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &pipe.contact, &pipe.solver).unwrap();
+    let fresh = ManyBodyPipeline::new(gpu(), &model, &bodies, 1, &cfg, &pipe.contact, &pipe.solver).unwrap();
     fresh.write_state(gpu(), &now);
     fresh.submit_frame(gpu());
     pipe.submit_frame(gpu());
@@ -274,24 +276,24 @@ fn coloured_gpu_step_matches_the_cpu_twin() {
 }
 
 #[test]
-fn crowd_frames_are_bitwise_reproducible() {
+fn many_body_frames_are_bitwise_reproducible() {
     frames_are_bitwise_reproducible(SleepConfig::OFF);
 }
 
 /// The same with sleeping on, loose enough that boxes fall asleep within the 15 frames.
 #[test]
-fn crowd_frames_with_sleeping_bodies_are_bitwise_reproducible() {
+fn many_body_frames_with_sleeping_bodies_are_bitwise_reproducible() {
     frames_are_bitwise_reproducible(SleepConfig { frames: 3, distance: 0.002, angle: 0.05 });
 }
 
 fn frames_are_bitwise_reproducible(sleep: SleepConfig) {
     let n = 12;
     let (model, bodies, start) = falling_boxes(n);
-    let cfg = CrowdConfig { sleep, ..CrowdConfig::for_bodies(n) };
+    let cfg = ManyBodyConfig { sleep, ..ManyBodyConfig::for_bodies(n) };
     let contact = ContactConfig { max_patches: 16, ..Default::default() };
     let solver = SolverConfig { pos_iters: 16, ..Default::default() };
     let run = || {
-        let pipe = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
+        let pipe = ManyBodyPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
         pipe.write_state(gpu(), &start);
         let mut slept = 0;
         for _ in 0..15 {
@@ -322,27 +324,27 @@ fn a_world_over_its_pair_capacity_is_flagged_and_left_as_it_was_while_others_ste
     two.body_q.extend(packed.iter().copied());
     two.body_qd.extend(vec![[Vec3::ZERO; 2]; n as usize]);
     let cpu_pairs = |q: &[TransformGpu]| {
-        let flat = CrowdFlat::new(&model, &contact).unwrap();
+        let flat = ManyBodyFlat::new(&model, &contact).unwrap();
         flat.near_pairs(&q.iter().map(|t| t.xf()).collect::<Vec<_>>(), 0, u32::MAX).0.len() as u32
     };
     let (loose, dense) = (cpu_pairs(&start.body_q), cpu_pairs(&packed));
     assert!(dense > loose + 10, "{dense} vs {loose} near pairs");
-    let cfg = CrowdConfig { max_pairs: loose + 5, ..CrowdConfig::for_bodies(n) };
-    let pipe = CrowdPipeline::new(gpu(), &model, &bodies, 2, &cfg, &contact, &solver).unwrap();
+    let cfg = ManyBodyConfig { max_pairs: loose + 5, ..ManyBodyConfig::for_bodies(n) };
+    let pipe = ManyBodyPipeline::new(gpu(), &model, &bodies, 2, &cfg, &contact, &solver).unwrap();
     pipe.write_state(gpu(), &two);
     pipe.submit_frame(gpu());
     let (s, ok) = pipe.read_state(gpu());
     let frames = pipe.read_frames(gpu());
     assert_eq!((ok[0], ok[1]), (true, false), "the packed world is flagged");
     assert_eq!(frames[1].flags, FLAG_PAIRS, "flagged for its pair count (alone)");
-    let mut cpu = CrowdCpu::new(&model, &bodies, &cfg, &contact, &solver).unwrap();
+    let mut cpu = ManyBodyCpu::new(&model, &bodies, &cfg, &contact, &solver).unwrap();
     let mut twin = two.clone();
     let c = cpu.step(&mut twin, &Control::default());
     assert_eq!((c[0].0.flags, c[1].0.flags, c[1].1), (0, FLAG_PAIRS, false), "the CPU twin flags alike");
     assert_eq!(&twin.body_q[n as usize..], &packed[..], "and leaves the world as it was");
     assert_eq!(&s.body_q[n as usize..], &packed[..], "the flagged world is left as it was");
     // World 0 steps exactly as it does alone.
-    let alone = CrowdPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
+    let alone = ManyBodyPipeline::new(gpu(), &model, &bodies, 1, &cfg, &contact, &solver).unwrap();
     alone.write_state(gpu(), &start);
     alone.submit_frame(gpu());
     let (a, _) = alone.read_state(gpu());
@@ -350,24 +352,24 @@ fn a_world_over_its_pair_capacity_is_flagged_and_left_as_it_was_while_others_ste
     assert_eq!(bits(&s.body_q[..n as usize]), bits(&a.body_q), "the other world is bitwise unchanged");
 }
 
-/// The job cull (`crowd::job_far_cpu`, contacts.wgsl) drops a run of query triangles on one SDF sample at
+/// The job cull (`many_body::job_far_cpu`, contacts.wgsl) drops a run of query triangles on one SDF sample at
 /// the centre of its bounding sphere; it must never drop one that has a candidate. Two boxes meshed with
 /// 2 mm triangles (spatially ordered into jobs of 256) and a 32-resolution grid, 300 random poses within
 /// reach of each other: every culled job, generated anyway, has no candidate.
 #[test]
 fn the_job_cull_never_drops_a_job_with_a_candidate() {
-    use factory_engine::contact::generate::{generate_job_cpu, Xf};
+    use factory_engine::contact::generate::{generate_job_cpu, RigidTransform};
     use factory_engine::contact::model::FlatModel;
-    use factory_engine::crowd::{job_far_cpu, NearPair};
+    use factory_engine::many_body::{job_far_cpu, NearPair};
     use factory_engine::mesh::box_mesh;
     use std::sync::Arc;
     let cache = SdfCache::new(SdfCache::default_dir());
     let mesh = Arc::new(box_mesh(H).split_long_triangles(0.002));
     let shape = |body| ShapeDesc::new(body, ShapeGeometry::Mesh { mesh: mesh.clone(), sdf_resolution: Some(32) });
     let spec = pair_spec(&shape(0), &shape(1), OFFSET, &cache).unwrap();
-    let model = CrowdModel::uniform(2, spec, vec![]);
+    let model = ManyBodyModel::uniform(2, spec, vec![]);
     let contact = ContactConfig { chunk_triangles: 256, max_patches: 16, ..Default::default() };
-    let flat = CrowdFlat::new(&model, &contact).unwrap();
+    let flat = ManyBodyFlat::new(&model, &contact).unwrap();
     assert!(flat.jobs_per_pair >= 4, "{} jobs per pair", flat.jobs_per_pair);
     let np = NearPair { a: 0, key: 1, b: 1, template: 0 };
     let one = FlatModel {
@@ -382,7 +384,7 @@ fn the_job_cull_never_drops_a_job_with_a_candidate() {
     for _ in 0..300 {
         let axis = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5).normalize_or(Vec3::Z);
         let p = Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5) * 0.09;
-        let q = [Xf::IDENTITY, TransformGpu::new(p, Quat::from_axis_angle(axis, rng.unit() * 6.0)).xf()];
+        let q = [RigidTransform::IDENTITY, TransformGpu::new(p, Quat::from_axis_angle(axis, rng.unit() * 6.0)).xf()];
         let wa = q[0].mul(&TransformGpu { p: pair.a_pos, q: pair.a_rot }.xf());
         let wb = q[1].mul(&TransformGpu { p: pair.b_pos, q: pair.b_rot }.xf());
         for (k, job) in one.jobs.iter().enumerate() {
@@ -402,13 +404,13 @@ fn the_job_cull_never_drops_a_job_with_a_candidate() {
 /// The auto-reset of one many-body world: world 1 is given a NaN velocity, is flagged, and is reset alone;
 /// a run in which it never broke but was reset to the same state at the same frame ends bitwise the same.
 #[test]
-fn a_broken_crowd_world_is_reset_alone_and_every_world_then_steps_as_if_it_never_broke() {
+fn a_broken_many_body_world_is_reset_alone_and_every_world_then_steps_as_if_it_never_broke() {
     let n = 12;
     let (model, bodies, start) = stacked_boxes();
-    let cfg = CrowdConfig::for_bodies(n);
+    let cfg = ManyBodyConfig::for_bodies(n);
     let contact = ContactConfig { max_patches: 16, ..Default::default() };
     let solver = SolverConfig { pos_iters: 16, ..Default::default() };
-    let pipe = CrowdPipeline::new(gpu(), &model, &bodies, 2, &cfg, &contact, &solver).unwrap();
+    let pipe = ManyBodyPipeline::new(gpu(), &model, &bodies, 2, &cfg, &contact, &solver).unwrap();
     let mut good = start.clone();
     good.body_q.extend(start.body_q.iter().copied());
     good.body_qd.extend(start.body_qd.iter().copied());
@@ -435,7 +437,7 @@ fn a_broken_crowd_world_is_reset_alone_and_every_world_then_steps_as_if_it_never
     assert_eq!(bits(&a), bits(&b), "both worlds bitwise as if world 1 never broke");
 }
 
-/// Sleeping (`CrowdConfig::sleep`): the six boxes of the stack's lower layer settle on the table and fall
+/// Sleeping (`ManyBodyConfig::sleep`): the six boxes of the stack's lower layer settle on the table and fall
 /// asleep, alike on the GPU and in the CPU twin; asleep, they keep their poses to the bit with zero velocity;
 /// a kinematic box driven across the table into them wakes the boxes it reaches, which then move, and never
 /// sleeps itself. (The upper layer is left out: at these settings, 1 substep and 16 iterations, its boxes,
@@ -469,7 +471,7 @@ fn a_settled_stack_falls_asleep_alike_on_the_gpu_and_in_the_twin_and_a_pusher_wa
     start.body_q.push(TransformGpu::new(Vec3::new(-0.15, 0.0, H.z + 0.0005), Quat::IDENTITY));
     start.body_qd.push([Vec3::new(PUSH_SPEED, 0.0, 0.0), Vec3::ZERO]);
     let sleep = SleepConfig { frames: SLEEP_FRAMES, distance: SLEEP_DISTANCE, angle: SLEEP_ANGLE };
-    let cfg = CrowdConfig { sleep, ..CrowdConfig::for_bodies(N as u32 + 1) };
+    let cfg = ManyBodyConfig { sleep, ..ManyBodyConfig::for_bodies(N as u32 + 1) };
     let (pipe, mut cpu) = pipe_and_twin(&model, &bodies, &cfg, &start);
     let mut state = start.clone();
     let mut last = start.clone();
@@ -553,11 +555,11 @@ fn sleep_settings_out_of_range_are_refused_naming_the_field() {
         (SleepConfig { angle: -0.1, ..on }, "sleep.angle"),
         (SleepConfig { angle: 4.0, ..on }, "sleep.angle"),
     ] {
-        let cfg = CrowdConfig { sleep, ..CrowdConfig::for_bodies(2) };
-        let err = CrowdCpu::new(&model, &bodies, &cfg, &contact, &solver).err().expect("refused").to_string();
+        let cfg = ManyBodyConfig { sleep, ..ManyBodyConfig::for_bodies(2) };
+        let err = ManyBodyCpu::new(&model, &bodies, &cfg, &contact, &solver).err().expect("refused").to_string();
         assert!(err.contains(field), "{sleep:?}: {err}");
     }
     // Off needs no bounds.
-    let cfg = CrowdConfig { sleep: SleepConfig::OFF, ..CrowdConfig::for_bodies(2) };
-    assert!(CrowdCpu::new(&model, &bodies, &cfg, &contact, &solver).is_ok());
+    let cfg = ManyBodyConfig { sleep: SleepConfig::OFF, ..ManyBodyConfig::for_bodies(2) };
+    assert!(ManyBodyCpu::new(&model, &bodies, &cfg, &contact, &solver).is_ok());
 }

@@ -1,10 +1,10 @@
-// Shared by the crowd kernels (near.wgsl, contacts.wgsl, solve.wgsl): the parameters and the layout of the
-// per-world bookkeeping buffer crowd_meta (u32 words, CrowdParams::meta_stride per world; see gpu.rs).
+// Shared by the many-body kernels (near.wgsl, contacts.wgsl, solve.wgsl): the parameters and the layout of the
+// per-world bookkeeping buffer many_body_meta (u32 words, ManyBodyParams::meta_stride per world; see gpu.rs).
 
-struct CrowdParams {
+struct ManyBodyParams {
     world_count: u32,
     body_count: u32,
-    // Near pairs a world may hold (CrowdConfig::max_pairs).
+    // Near pairs a world may hold (ManyBodyConfig::max_pairs).
     cap: u32,
     jobs_per_pair: u32,
     // Query triangles per job.
@@ -13,9 +13,9 @@ struct CrowdParams {
     static_count: u32,
     max_colours: u32,
     meta_stride: u32,
-    // Patches a world may hold (CrowdConfig::max_patches_per_world).
+    // Patches a world may hold (ManyBodyConfig::max_patches_per_world).
     patch_budget: u32,
-    // Sleeping (CrowdConfig::sleep; solve.wgsl): frames still before a body sleeps (0: never), the
+    // Sleeping (ManyBodyConfig::sleep; solve.wgsl): frames still before a body sleeps (0: never), the
     // largest displacement [m] and cos(largest rotation / 2) from the reference pose.
     sleep_frames: u32,
     sleep_distance: f32,
@@ -28,7 +28,7 @@ struct CrowdParams {
 
 // Per-dispatch parameters (a dynamic-offset uniform): the colouring round, or the solver pass's colour
 // and phase.
-// (The phase's warm and resample flags pick the crowd_pass entry point on the host, gpu.rs PHASES.)
+// (The phase's warm and resample flags pick the many_body_pass entry point on the host, gpu.rs PHASES.)
 struct PassParams {
     index: u32,
     bias: u32,
@@ -73,7 +73,7 @@ fn m_candidates(w: u32) -> u32 { return m_pairs(w) + 6u * cp.cap; }
 fn m_row_first(w: u32) -> u32 { return m_pairs(w) + 7u * cp.cap; }   // first patch of the pair's rows
 fn m_old_row_first(w: u32) -> u32 { return m_pairs(w) + 8u * cp.cap; }
 
-// Indirect dispatch arguments (x, y, z) in crowd_args.
+// Indirect dispatch arguments (x, y, z) in many_body_args.
 const A_PAIRS: u32 = 0u;     // one invocation per near pair (64 per workgroup)
 const A_GENERATE: u32 = 3u;  // one workgroup per (near pair, job, world)
 const A_MERGE: u32 = 6u;     // one workgroup per near pair
