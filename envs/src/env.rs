@@ -137,6 +137,52 @@ pub struct StepDiagnostics {
     pub contact_force_norms: Vec<(String, Vec<f32>)>,
 }
 
+/// Tenths of task progress that [`EnvProfile::progress_steps`] counts world-steps in.
+pub const PROGRESS_BINS: usize = 10;
+
+/// Where a host env's stepping time goes and how far through their tasks its worlds are, summed over every
+/// step since the env was built ([`Env::profile`]). The trainer reports it per update; the whole-run
+/// training benchmark weighs its phases by the progress counts (docs/BENCHMARKS.md).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct EnvProfile {
+    /// Wall time of each stage of [`Env::step`] [s], by name (the Franka envs: `contacts`, `solve`,
+    /// `controller`, `task`), summed over every step.
+    pub stage_seconds: Vec<(&'static str, f64)>,
+    /// World-steps by the world's task progress after the step (0 at the task's start, 1 at its end; Screw:
+    /// the nut's descent from resting on the bolt's tip to seated): entry k counts progress in
+    /// [k / 10, (k + 1) / 10), the last one including 1; shape [PROGRESS_BINS].
+    pub progress_steps: [u64; PROGRESS_BINS],
+    /// Work counted over every step, by name (the Franka envs: `candidates`, the query triangles within
+    /// reach of an SDF that contact generation ran its descent on; `contacts`, the contacts the solver got
+    /// after reduction), for the roofline of docs/BENCHMARKS.md. Empty where not counted (a device solve).
+    pub work: Vec<(&'static str, u64)>,
+}
+
+impl EnvProfile {
+    /// Adds `seconds` to stage `name` (a new stage goes last).
+    pub fn add_seconds(&mut self, name: &'static str, seconds: f64) {
+        match self.stage_seconds.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, s)) => *s += seconds,
+            None => self.stage_seconds.push((name, seconds)),
+        }
+    }
+
+    /// Adds `count` to work counter `name` (a new counter goes last).
+    pub fn add_work(&mut self, name: &'static str, count: u64) {
+        match self.work.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, c)) => *c += count,
+            None => self.work.push((name, count)),
+        }
+    }
+
+    /// Counts one world-step at `progress` (clamped to [0, 1]; NaN counts as 0).
+    pub fn add_progress(&mut self, progress: f32) {
+        let p = if progress.is_nan() { 0.0 } else { progress.clamp(0.0, 1.0) };
+        let k = ((p * PROGRESS_BINS as f32) as usize).min(PROGRESS_BINS - 1);
+        self.progress_steps[k] += 1;
+    }
+}
+
 /// A batch of `env_count` worlds stepped together.
 ///
 /// Implementations write into the caller's [`StepBuffers`] (sized by [`StepBuffers::new`]); stepping does not
@@ -154,6 +200,11 @@ pub trait Env: Send {
 
     /// Hook: the last step's measurements (None, the default, when the env has none).
     fn diagnostics(&self) -> Option<StepDiagnostics> {
+        None
+    }
+
+    /// Hook: the env's stage times and progress counts so far (None, the default, when it keeps none).
+    fn profile(&self) -> Option<EnvProfile> {
         None
     }
 
@@ -228,4 +279,24 @@ pub fn check_episode_steps(spec: &EnvSpec, steps: &[u32]) -> Result<()> {
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Progress lands in its tenth, 1 in the last, out-of-range values clamp, NaN counts as 0; stage times add
+    /// up under their names in first-seen order.
+    #[test]
+    fn profile_bins_progress_by_tenths_and_sums_stages() {
+        let mut p = EnvProfile::default();
+        for x in [0.0, 0.05, 0.1, 0.55, 0.999, 1.0, 1.5, -0.2, f32::NAN] {
+            p.add_progress(x);
+        }
+        assert_eq!(p.progress_steps, [4, 1, 0, 0, 0, 1, 0, 0, 0, 3]);
+        p.add_seconds("contacts", 0.5);
+        p.add_seconds("solve", 0.25);
+        p.add_seconds("contacts", 0.5);
+        assert_eq!(p.stage_seconds, vec![("contacts", 1.0), ("solve", 0.25)]);
+    }
 }

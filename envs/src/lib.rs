@@ -20,7 +20,7 @@ pub mod registry;
 
 #[cfg(feature = "device")]
 pub use device::{DeviceEnv, DeviceStep};
-pub use env::{EndCauses, Env, EnvSpec, StepBuffers, StepDiagnostics};
+pub use env::{EndCauses, Env, EnvProfile, EnvSpec, StepBuffers, StepDiagnostics, PROGRESS_BINS};
 pub use error::{EnvError, Result};
 pub use franka::nut_bolt::{FrankaNutBolt, FrankaNutBoltConfig};
 pub use point_mass::{PointMass, PointMassConfig};

@@ -36,6 +36,40 @@ fn screw_reset_puts_the_nut_on_the_first_thread_in_the_hand() {
     assert!(b.reward.iter().all(|r| r.is_finite() && *r < 0.0), "{:?}", b.reward);
 }
 
+/// `start_turns_down` puts the nut whole pitches below the first full thread (5 of the 11: 12 mm above its
+/// seat, 0.52 of the descent from the tip's 25 mm), and the env's profile counts each world-step in that
+/// tenth of its progress and times the step's stages. Deeper than two pitches above the seat, or without
+/// `start_engaged`, is refused by name.
+#[test]
+fn deeper_starts_and_the_progress_profile() {
+    let cfg = FrankaNutBoltConfig { start_turns_down: 5, ..engaged() };
+    let (mut e, mut b) = env(2, cfg);
+    e.reset(&mut b);
+    for w in 0..2 {
+        let nut_z = b.observation[w * 26 + 15];
+        assert!((nut_z - (0.012 + 0.016 + 0.0065)).abs() < 5e-4, "nut centre of mass z {nut_z}");
+    }
+    for _ in 0..3 {
+        e.step(&[0.0; 24], &mut b);
+    }
+    let p = e.profile().expect("the Franka env keeps a profile");
+    assert_eq!(p.progress_steps, [0, 0, 0, 0, 0, 6, 0, 0, 0, 0]);
+    let names: Vec<&str> = p.stage_seconds.iter().map(|(n, _)| *n).collect();
+    assert_eq!(names, ["controller", "contacts", "solve", "task"]);
+    assert!(p.stage_seconds.iter().all(|(_, s)| *s >= 0.0) && p.stage_seconds[1].1 > 0.0, "{p:?}");
+    // The nut on the thread and the pads on its flats: contacts every step, from more candidates.
+    let work: Vec<&str> = p.work.iter().map(|(n, _)| *n).collect();
+    assert_eq!(work, ["candidates", "contacts"]);
+    assert!(p.work[1].1 >= 6 && p.work[0].1 >= p.work[1].1, "{:?}", p.work);
+    for (cfg, needle) in [
+        (FrankaNutBoltConfig { start_turns_down: 10, ..engaged() }, "valid: 0..=9"),
+        (FrankaNutBoltConfig { start_turns_down: 1, ..Default::default() }, "needs start_engaged"),
+    ] {
+        let err = FrankaNutBolt::new(&cfg, 1, 0).err().expect("refused").to_string();
+        assert!(err.contains("start_turns_down") && err.contains(needle), "{err}");
+    }
+}
+
 /// With zero actions (yaw not turning) the closed hand holds the nut on the bolt's first thread for 5 s: the
 /// episode still running (no slip, fall or far error), the nut's height within 0.5 mm of its start (the nut
 /// stays on its thread) and the nut within 0.5 mm of the bolt's axis. Regression test for Factory's 2

@@ -35,6 +35,10 @@ pub struct EvalReport {
     /// action the physics then plays one episode in every world (a world's physics does not depend on the
     /// batch), so the success rate can only be 0 or 1 up to the resets' own draws.
     pub identical_starts: bool,
+    /// World-steps of the evaluation by task progress tenth ([`factory_envs::EnvProfile::progress_steps`]),
+    /// every world counted until the last episode ended; absent for an env that reports no progress.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub progress_steps: Vec<u64>,
 }
 
 impl EvalReport {
@@ -171,6 +175,7 @@ pub fn evaluate(
     let (n, d, a_dim) = (spec.env_count, spec.observation_dim(), spec.action_dim());
     let mut buf = StepBuffers::new(&spec);
     env.reset(&mut buf);
+    let profile_before = env.profile();
     let identical_starts = buf.observation.chunks(d).all(|o| o == &buf.observation[..d]);
     let mut ret = vec![0.0f64; n];
     let mut len = vec![0u32; n];
@@ -233,6 +238,10 @@ pub fn evaluate(
     if let Some(b) = bar {
         b.finish();
     }
+    let progress_steps = match (env.profile(), profile_before) {
+        (Some(a), Some(b)) => a.progress_steps.iter().zip(&b.progress_steps).map(|(x, y)| x - y).collect(),
+        _ => Vec::new(),
+    };
     EvalReport {
         episodes: done,
         stochastic: noise_seed.is_some(),
@@ -242,6 +251,7 @@ pub fn evaluate(
         mean_joint_torque_norm: if torque_count > 0 { torque_sum / torque_count as f64 } else { f64::NAN },
         ended_by,
         identical_starts,
+        progress_steps,
     }
 }
 

@@ -237,6 +237,9 @@ pub struct Ppo {
     pub obs_dim: usize,
     /// Action entries.
     pub action_dim: usize,
+    /// Wall time of the host rollouts' acting so far [s]: the observation's upload, the forward pass and
+    /// the action's readback (the `policy` stage of an update's report).
+    pub act_seconds: f64,
 }
 
 impl Ppo {
@@ -268,6 +271,7 @@ impl Ppo {
             env_count,
             obs_dim,
             action_dim,
+            act_seconds: 0.0,
         }
     }
 
@@ -306,10 +310,13 @@ impl Ppo {
         let flags = |v: &[f32], dev: &Device| Tensor::<1>::from_floats(v, dev);
         let mut steps = Steps::default();
         for _ in 0..self.cfg.horizon {
+            let started = std::time::Instant::now();
             let raw = Tensor::<1>::from_floats(buf.observation.as_slice(), &self.device).reshape([n, self.obs_dim]);
             let action = self.act(&policy, &gaussian, raw, &mut steps);
             // The one readback per step on a host env: the actions it must apply.
-            env.step(&to_vec(action), buf);
+            let action = to_vec(action);
+            self.act_seconds += started.elapsed().as_secs_f64();
+            env.step(&action, buf);
             episodes.record(buf);
             steps.reward.push(flags(&buf.reward, &self.device));
             steps.terminated.push(flags(&buf.terminated, &self.device));

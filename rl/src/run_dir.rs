@@ -33,8 +33,10 @@ pub fn utc_stamp(unix_seconds: u64) -> String {
     format!("{y:04}{m:02}{d:02}-{:02}{:02}{:02}", secs / 3600, secs / 60 % 60, secs % 60)
 }
 
-/// The CSV columns of `metrics.csv`.
-pub const CSV_HEADER: &str = "update,env_steps,wall_seconds,success_rate,mean_return,episodes,actor_loss,critic_loss,bounds_loss,mean_reward,sigma,rollout_seconds,learn_seconds,ended_by";
+/// The CSV columns of `metrics.csv`. The last three hold space-separated lists: `ended_by` as
+/// `cause=count`, `stage_seconds` as `stage=seconds` ([`UpdateReport::stage_seconds`]) and `progress_steps`
+/// as ten counts, one per tenth of task progress (empty for an env without progress).
+pub const CSV_HEADER: &str = "update,env_steps,wall_seconds,success_rate,mean_return,episodes,actor_loss,critic_loss,bounds_loss,mean_reward,sigma,rollout_seconds,learn_seconds,ended_by,stage_seconds,progress_steps";
 
 /// Appends per-update rows to `metrics.csv`.
 pub struct MetricsCsv {
@@ -67,7 +69,7 @@ impl MetricsCsv {
         let s = &r.stats;
         writeln!(
             self.file,
-            "{},{},{:.3},{},{},{},{},{},{},{},{},{:.4},{:.4},{}",
+            "{},{},{:.3},{},{},{},{},{},{},{},{},{:.4},{:.4},{},{},{}",
             r.update,
             r.env_steps,
             wall_seconds,
@@ -81,7 +83,9 @@ impl MetricsCsv {
             s.sigma,
             r.rollout_seconds,
             r.learn_seconds,
-            r.ended_by.summary()
+            r.ended_by.summary(),
+            r.stage_seconds.iter().map(|(k, v)| format!("{k}={v:.4}")).collect::<Vec<_>>().join(" "),
+            r.progress_steps.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(" "),
         )
         .and_then(|_| self.file.flush())
         .map_err(|e| RlError::io(&self.path, e))

@@ -186,7 +186,20 @@ pub struct UpdateReport {
     pub rollout_seconds: f64,
     /// Wall time of the PPO update [s].
     pub learn_seconds: f64,
+    /// The update's wall time by stage [s]: a host env's own stages ([`factory_envs::EnvProfile`]; the
+    /// Franka envs: `contacts`, `solve`, `controller`, `task`), `policy` (acting), `rollout_other` (the rest
+    /// of the rollout) and `learn`. A device rollout (nothing waited for per stage) has `rollout_other` and
+    /// `learn` only.
+    pub stage_seconds: std::collections::BTreeMap<String, f64>,
+    /// This rollout's world-steps by task progress tenth ([`factory_envs::EnvProfile::progress_steps`]);
+    /// empty when the env does not report progress.
+    pub progress_steps: Vec<u64>,
+    /// This rollout's work counts by name ([`factory_envs::EnvProfile::work`]); empty where not counted.
+    pub work: std::collections::BTreeMap<String, u64>,
 }
+
+/// An update's stage times [s], progress counts and work counts ([`UpdateReport`]'s fields).
+type ProfileDelta = (std::collections::BTreeMap<String, f64>, Vec<u64>, std::collections::BTreeMap<String, u64>);
 
 /// The episodes that ended over the last `window` updates, for a progress line: with long episodes (Screw:
 /// ~1750 steps, 55 updates of horizon 32) most single updates end none.
@@ -329,6 +342,7 @@ impl Trainer {
 
     /// One rollout and one PPO update.
     pub fn update(&mut self) -> UpdateReport {
+        let before = self.profile();
         let t0 = Instant::now();
         let (t1, stats, k, succ, ret, ended_by) = match &mut self.run {
             EnvRun::Host { env, buf, episodes } => {
@@ -351,6 +365,8 @@ impl Trainer {
             }
         };
         let t2 = Instant::now();
+        let (stage_seconds, progress_steps, work) =
+            self.profile_delta(before, (t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
         self.updates_done += 1;
         self.env_steps += (self.cfg.ppo.horizon * self.cfg.train.env_count) as u64;
         self.wall_seconds += (t2 - t0).as_secs_f64();
@@ -364,7 +380,48 @@ impl Trainer {
             ended_by,
             rollout_seconds: (t1 - t0).as_secs_f64(),
             learn_seconds: (t2 - t1).as_secs_f64(),
+            stage_seconds,
+            progress_steps,
+            work,
         }
+    }
+
+    /// The host env's profile and the learner's acting time so far.
+    fn profile(&self) -> (Option<factory_envs::EnvProfile>, f64) {
+        match &self.run {
+            EnvRun::Host { env, .. } => (env.profile(), self.ppo.act_seconds),
+            EnvRun::Device { .. } => (None, self.ppo.act_seconds),
+        }
+    }
+
+    /// An update's stage times, progress counts and work counts: what [`profile`](Self::profile) gained
+    /// since `before`.
+    fn profile_delta(&self, before: (Option<factory_envs::EnvProfile>, f64), rollout: f64, learn: f64) -> ProfileDelta {
+        let (env_before, act_before) = before;
+        let (env_after, act_after) = self.profile();
+        let mut stages = std::collections::BTreeMap::new();
+        let mut progress = Vec::new();
+        let mut work = std::collections::BTreeMap::new();
+        let mut accounted = 0.0;
+        if let (Some(a), Some(b)) = (env_after, env_before) {
+            for (name, s) in &a.stage_seconds {
+                let was = b.stage_seconds.iter().find(|(n, _)| n == name).map_or(0.0, |(_, s)| *s);
+                stages.insert(name.to_string(), s - was);
+                accounted += s - was;
+            }
+            progress = a.progress_steps.iter().zip(&b.progress_steps).map(|(x, y)| x - y).collect();
+            for (name, c) in &a.work {
+                let was = b.work.iter().find(|(n, _)| n == name).map_or(0, |(_, c)| *c);
+                work.insert(name.to_string(), c - was);
+            }
+        }
+        if matches!(self.run, EnvRun::Host { .. }) {
+            stages.insert("policy".into(), act_after - act_before);
+            accounted += act_after - act_before;
+        }
+        stages.insert("rollout_other".into(), (rollout - accounted).max(0.0));
+        stages.insert("learn".into(), learn);
+        (stages, progress, work)
     }
 
     /// Writes a checkpoint atomically.
@@ -405,6 +462,9 @@ mod tests {
             ended_by: EndCauses(ends.iter().map(|(k, v)| (k.to_string(), *v)).collect()),
             rollout_seconds: 0.0,
             learn_seconds: 0.0,
+            stage_seconds: Default::default(),
+            progress_steps: Vec::new(),
+            work: Default::default(),
         };
         let mut r = RecentEpisodes::new(2);
         r.push(&report(0, &[]));

@@ -88,6 +88,11 @@ fn train_export_evaluate_plot() {
         assert_eq!(row.len(), CSV_HEADER.split(',').count(), "row {}: {row:?}", i + 1);
         assert_eq!(row[0], (i + 1).to_string(), "the update column");
         assert_eq!(row[1], ((i + 1) * ENVS * HORIZON).to_string(), "the env_steps column");
+        // The point mass rolls out on the learner's device (`rollout = "auto"`): the rollout is one stage,
+        // nothing waited for per step; it reports no progress.
+        let stages: Vec<&str> = row[14].split(' ').map(|kv| kv.split('=').next().unwrap()).collect();
+        assert_eq!(stages, ["learn", "rollout_other"], "the stage_seconds column");
+        assert_eq!(row[15], "", "the progress_steps column");
     }
 
     // The checkpoint resumes at the end of the run.

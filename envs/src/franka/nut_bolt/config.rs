@@ -114,6 +114,10 @@ pub struct FrankaNutBoltConfig {
     /// only the bolt holds the hand sideways: on a flat-cut tip the nut slid off it (see
     /// `bolt_tip_chamfer`); on the chamfer it is centred. The engaged start is the easier task.
     pub start_engaged: bool,
+    /// Whole turns (thread pitches) the nut starts below the first full thread, with `start_engaged`: the
+    /// deeper starts of the whole-run training benchmark (scripts/bench_training.sh), so each phase of a
+    /// Screw episode can be timed on its own. At most the turns that leave two pitches above the seat.
+    pub start_turns_down: u32,
     /// Nut centre-of-mass distance from its target that ends the episode as a failure [m].
     pub far_error: f32,
     /// Reward added on the step that succeeds (Factory's Screw: 0).
@@ -174,6 +178,7 @@ impl Default for FrankaNutBoltConfig {
             failure_penalty: 0.0,
             randomize: ScrewRandomization::default(),
             start_engaged: false,
+            start_turns_down: 0,
             observe_finger_force: false,
             observe_previous_action: false,
             solve: CoupledSolve::Auto,
@@ -250,6 +255,15 @@ impl FrankaNutBoltConfig {
                 return bad(field, format!("{value} is not {expected}"));
             }
             Err(e) => return Err(e.into()),
+        }
+        if self.start_turns_down > 0 && !self.start_engaged {
+            return bad(
+                "start_turns_down",
+                format!(
+                    "{} needs start_engaged = true (the turns count down from the first full thread)",
+                    self.start_turns_down
+                ),
+            );
         }
         if self.segments_per_turn < 8 {
             return bad("segments_per_turn", format!("{} is below 8", self.segments_per_turn));

@@ -31,7 +31,7 @@ use factory_engine::solver::{Control, SolverConfig};
 use glam::{Quat, Vec3};
 
 use super::scene::{NutBoltScene, SceneConfig, ARM_DOF, BASE, DOF, Q_START};
-use crate::env::{Env, EnvSpec, StepBuffers, StepDiagnostics};
+use crate::env::{Env, EnvProfile, EnvSpec, StepBuffers, StepDiagnostics};
 use crate::error::{EnvError, Result};
 
 mod config;
@@ -69,6 +69,10 @@ pub struct FrankaNutBolt {
     world_prev_action: Vec<f32>,
     /// The last step's measurements.
     last_diagnostics: StepDiagnostics,
+    /// The nut frame's height when resting on the bolt's tip [m] (the Screw progress's start).
+    tip_rest_z: f32,
+    /// Stage times and progress counts since the env was built.
+    profile: EnvProfile,
 }
 
 /// Joint positions that put the fingertip at `pos` with orientation `quat`, from `q0` (damped least squares
@@ -97,6 +101,65 @@ fn inverse_kinematics(scene: &NutBoltScene, q0: &[f32; DOF], pos: Vec3, quat: Qu
         }
     }
     q
+}
+
+/// The nut frame's height above its seat at the start of an episode [m]: resting on the bolt's tip (the
+/// shank's top), or on the first full thread (`start_engaged`) and `start_turns_down` pitches below it.
+fn start_height(scene: &NutBoltScene, cfg: &FrankaNutBoltConfig) -> Result<f32> {
+    let shank = scene.nb.dims.shank_length as f32;
+    if !cfg.start_engaged {
+        return Ok(shank);
+    }
+    // The first full thread: the highest whole number of pitches above the seat that is not above the tip or
+    // in its chamfer (the thread maps onto itself under a one-pitch translation, so the nut fits there at yaw
+    // 0, flats normal to x: the fingers close along x at yaw 0).
+    let pitch = scene.nb.pitch;
+    let chamfer = match scene.nb.bolt_tip_radius {
+        Some(_) => factory_assets::bolt_tip_chamfer_height(&scene.nb.spec) as f32,
+        None => 0.0,
+    };
+    let first = ((shank - chamfer) / pitch + 1e-4).floor();
+    // Two pitches above the seat at the deepest: success is within one.
+    let most = (first as u32).saturating_sub(2);
+    if cfg.start_turns_down > most {
+        return Err(EnvError::InvalidValue {
+            field: "start_turns_down",
+            reason: format!(
+                "{} turns below the first full thread ({first} pitches above the seat); valid: 0..={most}",
+                cfg.start_turns_down
+            ),
+        });
+    }
+    Ok((first - cfg.start_turns_down as f32) * pitch)
+}
+
+/// The observation's names (fingertip and nut pose and twist; the pads' forces and the previous action when
+/// observed) and the action's.
+fn observation_and_action_names(cfg: &FrankaNutBoltConfig) -> (Vec<String>, Vec<String>) {
+    let mut names: Vec<String> = Vec::new();
+    for body in ["fingertip", "nut"] {
+        for (what, axes) in [("pos_m", "xyz"), ("quat", "xyzw"), ("linvel_m_s", "xyz"), ("angvel_rad_s", "xyz")] {
+            for a in axes.chars() {
+                names.push(format!("{body}_{what}_{a}"));
+            }
+        }
+    }
+    if cfg.observe_finger_force {
+        for f in ["left", "right"] {
+            for a in "xyz".chars() {
+                names.push(format!("{f}_finger_force_n_{a}"));
+            }
+        }
+    }
+    let action_names: Vec<String> = ["dpos_x", "dpos_y", "dpos_z", "drot_x", "drot_y", "drot_z"]
+        .into_iter()
+        .chain(["force_x", "force_y", "force_z", "torque_x", "torque_y", "torque_z"])
+        .map(String::from)
+        .collect();
+    if cfg.observe_previous_action {
+        names.extend(action_names.iter().map(|a| format!("prev_{a}")));
+    }
+    (names, action_names)
 }
 
 impl FrankaNutBolt {
@@ -133,15 +196,7 @@ impl FrankaNutBolt {
         let controller = build(&cfg.controller, DOF, ARM_DOF)?;
         let d = scene.nb.dims;
         let (head, shank, nut_h) = (d.head_height as f32, d.shank_length as f32, d.nut_height as f32);
-        // The nut on the bolt's first full thread: the highest whole number of pitches above its seat that
-        // is not above the tip or in its chamfer (the thread maps onto itself under a one-pitch translation,
-        // so the nut fits there at yaw 0, flats normal to x: the fingers close along x at yaw 0).
-        let pitch = scene.nb.pitch;
-        let chamfer = match scene.nb.bolt_tip_radius {
-            Some(_) => factory_assets::bolt_tip_chamfer_height(&scene.nb.spec) as f32,
-            None => 0.0,
-        };
-        let start_z = if cfg.start_engaged { ((shank - chamfer) / pitch + 1e-4).floor() * pitch } else { shank };
+        let start_z = start_height(&scene, cfg)?;
         let reset_nut = (Vec3::Z * start_z, Quat::IDENTITY);
         // Factory's Screw pose, its fingertip moved onto the nut by IK: pointing down (Q_START's orientation
         // without its yaw), fingers just open around the flats.
@@ -200,29 +255,7 @@ impl FrankaNutBolt {
         }
         scene.sim.sync_links();
         scene.sim.solve_on(gpu, cfg.solve)?;
-        let mut names: Vec<String> = Vec::new();
-        for body in ["fingertip", "nut"] {
-            for (what, axes) in [("pos_m", "xyz"), ("quat", "xyzw"), ("linvel_m_s", "xyz"), ("angvel_rad_s", "xyz")] {
-                for a in axes.chars() {
-                    names.push(format!("{body}_{what}_{a}"));
-                }
-            }
-        }
-        if cfg.observe_finger_force {
-            for f in ["left", "right"] {
-                for a in "xyz".chars() {
-                    names.push(format!("{f}_finger_force_n_{a}"));
-                }
-            }
-        }
-        let action_names: Vec<String> = ["dpos_x", "dpos_y", "dpos_z", "drot_x", "drot_y", "drot_z"]
-            .into_iter()
-            .chain(["force_x", "force_y", "force_z", "torque_x", "torque_y", "torque_z"])
-            .map(String::from)
-            .collect();
-        if cfg.observe_previous_action {
-            names.extend(action_names.iter().map(|a| format!("prev_{a}")));
-        }
+        let (names, action_names) = observation_and_action_names(cfg);
         let spec = EnvSpec {
             name: "franka_nut_bolt".into(),
             env_count,
@@ -247,6 +280,8 @@ impl FrankaNutBolt {
             world_steps: vec![0; env_count],
             world_prev_action: vec![0.0; env_count * 12],
             last_diagnostics: StepDiagnostics::default(),
+            tip_rest_z: shank,
+            profile: EnvProfile::default(),
         })
     }
 
@@ -442,6 +477,10 @@ impl Env for FrankaNutBolt {
         Some(self.last_diagnostics.clone())
     }
 
+    fn profile(&self) -> Option<EnvProfile> {
+        Some(self.profile.clone())
+    }
+
     fn set_episode_steps(&mut self, steps: &[u32]) -> Result<()> {
         crate::env::check_episode_steps(&self.spec, steps)?;
         self.world_steps.copy_from_slice(steps);
@@ -509,6 +548,7 @@ impl Env for FrankaNutBolt {
     }
 
     fn step(&mut self, action: &[f32], out: &mut StepBuffers) {
+        let started = std::time::Instant::now();
         let n = self.spec.env_count;
         let arm = self.scene.arm();
         let targets = action_targets(&self.cfg, &arm, action);
@@ -522,7 +562,13 @@ impl Env for FrankaNutBolt {
                 control.joint_target_q[w * DOF + ARM_DOF + f] = targets.gripper_q[w * 2 + f];
             }
         }
+        let controlled = started.elapsed().as_secs_f64();
         let diverged = self.scene.sim.step(self.gpu, &Control::default(), &control);
+        let (contacts, solve) = (self.scene.sim.last_handling_s, self.scene.sim.last_solve_s);
+        if let Some(c) = &self.scene.sim.contacts {
+            self.profile.add_work("candidates", c.candidates.iter().map(|&k| k as u64).sum());
+            self.profile.add_work("contacts", (0..c.patches.len()).map(|i| c.contact_count(i) as u64).sum());
+        }
         self.measure(&control.joint_tau);
         for w in 0..n {
             for k in 0..12 {
@@ -533,6 +579,8 @@ impl Env for FrankaNutBolt {
         let views = self.views(&arm);
         let mut any_reset = false;
         for (w, v) in views.iter().enumerate() {
+            // The descent from resting on the tip (the frame at the shank's top) to seated (the frame at 0).
+            self.profile.add_progress(1.0 - v.nut_frame.z / self.tip_rest_z);
             self.world_steps[w] += 1;
             let outcome = if diverged[w] { Outcome::Failure("diverged") } else { self.task.outcome(v) };
             let reward = if diverged[w] { 0.0 } else { self.task.reward(v) }
@@ -564,6 +612,11 @@ impl Env for FrankaNutBolt {
             arm
         };
         self.observe(&arm, &mut out.observation);
+        let p = &mut self.profile;
+        p.add_seconds("controller", controlled);
+        p.add_seconds("contacts", contacts);
+        p.add_seconds("solve", solve);
+        p.add_seconds("task", started.elapsed().as_secs_f64() - controlled - contacts - solve);
     }
 }
 
