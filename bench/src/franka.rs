@@ -22,9 +22,9 @@
 //! Every stage uses operational-space control on all six axes (kp 100, kd 20); the motion stages' targets
 //! move towards each waypoint at most [`TARGET_SPEED`] and [`TARGET_YAW_RATE`].
 //!
-//! Solver: the paper's 4 substeps; 32 position iterations (the paper: 16) with 8 passes per sweep over the
-//! pads' patches (`SolverConfig::link_patch_iters`): at 16, or without the extra passes, the pads crept
-//! down a nut pressed on the bolt's tip until they let go of it (docs/BENCHMARKS.md).
+//! Solver and contacts: the Screw env's (`factory_envs::franka::scene::screw_solver`: 4 substeps x 32
+//! position iterations, the paper: 4 x 16, with 8 passes per sweep over the pads' patches; the engine's
+//! default contact settings): with 16 iterations, or without the extra passes, the pads creep along the nut.
 
 use anyhow::{ensure, Context, Result};
 use factory_assets::NutBolt;
@@ -38,7 +38,7 @@ use factory_engine::sim::ArticulatedSim;
 use factory_engine::solver::{Control, SolverConfig};
 use factory_engine::wgpu;
 
-use factory_envs::franka::scene::{ContactMaterials, NutBoltScene, SceneConfig};
+use factory_envs::franka::scene::{screw_solver, ContactMaterials, NutBoltScene, SceneConfig};
 use glam::{Quat, Vec3};
 
 use std::time::Instant;
@@ -93,18 +93,9 @@ impl Default for FrankaNutBoltRun {
             worlds: 16,
             seconds: 60.0,
             seed: 1,
-            // The paper's Table II row for this scene is 4 substeps and 16 position iterations; at 16 the
-            // pads creep down the nut (about 0.1 mm per frame) while it is pressed on the bolt's tip: the
-            // chain arm - pads - nut - bolt, with a 100:1 mass ratio between the arm and the nut, needs more
-            // Gauss-Seidel sweeps than the paper's PhysX solver. 32, with 8 passes over each pad patch per
-            // sweep (SolverConfig::link_patch_iters), hold it (docs/BENCHMARKS.md).
-            solver: SolverConfig {
-                substeps: 4,
-                pos_iters: 32,
-                vel_iters: 0,
-                link_patch_iters: 8,
-                ..Default::default()
-            },
+            // The Screw env's solver (4 substeps x 32 iterations; the paper's Table II row for this scene:
+            // 4 x 16, at which the pads creep along the nut).
+            solver: screw_solver(),
             contact: ContactConfig::default(),
             segments_per_turn: 48,
             materials: ContactMaterials::default(),

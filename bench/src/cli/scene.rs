@@ -110,22 +110,25 @@ pub struct SceneArgs {
     /// [default: nut-bolt 1; piles 10].
     #[arg(long)]
     offset_mm: Option<f32>,
-    /// Projected-gradient iterations per query triangle.
-    #[arg(long, default_value_t = 12)]
-    descent_iters: u32,
+    /// Projected-gradient iterations per query triangle [default: 12, ContactConfig::default, as the Screw
+    /// env].
+    #[arg(long)]
+    descent_iters: Option<u32>,
     /// Candidates per invocation of the contact kernels (1, 2 or 4; ContactConfig::candidates_per_invocation:
-    /// 4 is faster on lavapipe and keeps other contacts, see docs/BENCHMARKS.md).
-    #[arg(long, default_value_t = 1)]
-    per: u32,
-    /// Invocations per contact workgroup (32, 64, 128, 256; at most 256 candidates per workgroup).
-    #[arg(long, default_value_t = 64)]
-    workgroup: u32,
+    /// 4 is faster on lavapipe and keeps other contacts, see docs/BENCHMARKS.md) [default: 1].
+    #[arg(long)]
+    per: Option<u32>,
+    /// Invocations per contact workgroup (32, 64, 128, 256; at most 256 candidates per workgroup)
+    /// [default: 64].
+    #[arg(long)]
+    workgroup: Option<u32>,
     /// Run an invocation's four query triangles one after another instead of side by side
     /// (ContactConfig::interleaved_descent; the same results, for comparing speed).
     #[arg(long)]
     sequential_descent: bool,
-    /// Thread columns per turn of the generated nut and bolt meshes (multiple of 12, >= 24).
-    #[arg(long, default_value_t = 192)]
+    /// Thread columns per turn of the generated nut and bolt meshes (multiple of 12, >= 24; 48 as the Screw
+    /// env).
+    #[arg(long, default_value_t = 48)]
     segments_per_turn: usize,
     /// ISO size (M4, M8, M12, M16, M20).
     #[arg(long, default_value = "M16")]
@@ -172,15 +175,15 @@ impl SceneArgs {
         }
     }
 
-    /// The contact settings given on the command line, with the scene's patch budget.
-    fn contact(&self, max_patches: u32) -> ContactConfig {
+    /// The contact settings given on the command line over the scene's own (`base`).
+    fn contact(&self, base: ContactConfig) -> ContactConfig {
         ContactConfig {
-            max_patches,
-            iterations: self.descent_iters,
-            candidates_per_invocation: self.per,
-            workgroup_size: self.workgroup,
+            max_patches: self.patches.unwrap_or(base.max_patches),
+            iterations: self.descent_iters.unwrap_or(base.iterations),
+            candidates_per_invocation: self.per.unwrap_or(base.candidates_per_invocation),
+            workgroup_size: self.workgroup.unwrap_or(base.workgroup_size),
             interleaved_descent: !self.sequential_descent,
-            ..Default::default()
+            ..base
         }
     }
 }
@@ -200,20 +203,14 @@ fn run_franka_scene(args: &SceneArgs) -> Result<()> {
         worlds: args.worlds,
         seconds: args.seconds.unwrap_or(base.seconds),
         seed: args.seed,
-        // 4 substeps as the paper's Table II row, 32 position iterations (the paper: 16; see
-        // FrankaNutBoltRun::default), 0 velocity iterations as Factory's tasks; --substeps /
-        // --pos-iters / --vel-iters override.
+        // The Screw env's solver (FrankaNutBoltRun::default: 4 substeps, 32 position and 0 velocity
+        // iterations); --substeps / --pos-iters / --vel-iters override.
         solver: SolverConfig {
             vel_iters: args.vel_iters.unwrap_or(0),
             link_patch_iters: args.link_patch_iters.unwrap_or(base.solver.link_patch_iters),
             ..args.solver(&base.solver)
         },
-        contact: ContactConfig {
-            candidates_per_invocation: args.per,
-            workgroup_size: args.workgroup,
-            interleaved_descent: !args.sequential_descent,
-            ..Default::default()
-        },
+        contact: args.contact(base.contact.clone()),
         thread_mu: args.mu.or(base.thread_mu),
         finger_drive: [args.finger_kp.unwrap_or(base.finger_drive[0]), args.finger_kd.unwrap_or(base.finger_drive[1])],
         bolt_tip_chamfer: args.bolt_tip_chamfer,
@@ -236,7 +233,7 @@ fn run_pile_scene(args: &SceneArgs) -> Result<()> {
         bodies: args.bodies,
         worlds: args.worlds,
         seconds: args.seconds.unwrap_or(1.0),
-        contact: args.contact(args.patches.unwrap_or(16)),
+        contact: args.contact(ContactConfig { max_patches: 16, ..Default::default() }),
         solver: args.solver(&kind.paper_solver()),
         mu: args.mu.unwrap_or(0.5),
         contact_offset: args.offset_mm.unwrap_or(10.0) * 1e-3,
@@ -272,7 +269,7 @@ fn run_nut_bolt_scene(args: &SceneArgs) -> Result<()> {
         worlds: args.worlds,
         seconds: args.seconds.unwrap_or(1.0),
         sdf_resolution,
-        contact: args.contact(args.patches.unwrap_or(64)),
+        contact: args.contact(ContactConfig::default()),
         solver: args.solver(&paper),
         mu,
         contact_offset: args.offset_mm.unwrap_or(1.0) * 1e-3,

@@ -6,7 +6,7 @@ use factory_engine::sim::CoupledSolve;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{EnvError, Result};
-use crate::franka::scene::ContactMaterials;
+use crate::franka::scene::{screw_solver, ContactMaterials};
 
 /// The tasks on this env.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -46,9 +46,9 @@ pub struct FrankaNutBoltConfig {
     pub task: TaskName,
     /// Control step [s] (Factory: 1/60).
     pub dt: f32,
-    /// Solver substeps per control step (Factory's tasks: 2; default 4, see below).
+    /// Solver substeps per control step (Factory's tasks: 2; default 4, see `scene::screw_solver`).
     pub substeps: u32,
-    /// Gauss-Seidel position iterations per substep (Factory's tasks: 16; default 32, see below).
+    /// Gauss-Seidel position iterations per substep (Factory's tasks: 16; default 32, see `scene::screw_solver`).
     pub pos_iters: u32,
     /// Extra passes over the finger pads' contact patches per sweep (SolverConfig::link_patch_iters).
     pub link_patch_iters: u32,
@@ -101,14 +101,19 @@ pub struct FrankaNutBoltConfig {
     /// Thread columns per turn of the generated nut mesh.
     pub segments_per_turn: usize,
     /// Projected-gradient iterations per nut triangle in contact generation (ContactConfig::iterations;
-    /// the engine's default 12).
+    /// the engine's default 12). At 4, with 4 candidates per invocation in workgroups of 32, the Screw env's
+    /// contact handling takes about half the time on lavapipe, but the frozen policy of docs/BENCHMARKS.md
+    /// ("Training pace") loses more nuts from the hand.
     pub contact_descent_iters: u32,
     /// Nut triangles each contact-generation invocation takes per reduction batch
-    /// (ContactConfig::candidates_per_invocation: 1, 2 or 4; default 1, the setting the Screw policy of
-    /// docs/RESULTS.md was trained with). 4 runs a quarter of the reduction's rounds: a trained policy's
-    /// Screw steps 1.23x faster on lavapipe, and that policy (trained at 1) seats 120 of 128 episodes at 4
-    /// against 123 at 1 (docs/BENCHMARKS.md); batches in another order keep other contacts.
+    /// (ContactConfig::candidates_per_invocation: 1, 2 or 4; default 1). 4 runs a quarter of the
+    /// reduction's rounds, faster on lavapipe, but batches in another order keep other contacts: at 4 the
+    /// frozen policy of docs/BENCHMARKS.md ("Training pace") seats 62 of 128 episodes against 113 (its nut
+    /// slips in the hand more often).
     pub contact_candidates_per_invocation: u32,
+    /// Invocations per contact-generation workgroup (ContactConfig::workgroup_size: 32, 64, 128 or 256, at
+    /// most 256 candidates a batch with `contact_candidates_per_invocation`; default 64).
+    pub contact_workgroup_size: u32,
     /// Start the nut on the bolt's first full thread below the tip's chamfer (engaged) instead of resting
     /// on the tip (IsaacGymEnvs' Screw, the default). Factory's Screw controller acts on z and yaw only, so
     /// only the bolt holds the hand sideways: on a flat-cut tip the nut slid off it (see
@@ -144,13 +149,10 @@ impl Default for FrankaNutBoltConfig {
         Self {
             task: TaskName::Screw,
             dt: 1.0 / 60.0,
-            // Factory's 2 substeps and 16 iterations do not hold the nut here: with zero actions the pads
-            // slide up the nut and let it go within 0.7 s (measured, envs/tests/franka_screw.rs); 4 and 32 (the
-            // scripted scene's settings, docs/BENCHMARKS.md) hold it 10 s. Our Gauss-Seidel needs more sweeps
-            // than PhysX's for the arm - pads - nut - bolt chain (docs/ARCHITECTURE.md section 6).
-            substeps: 4,
-            pos_iters: 32,
-            link_patch_iters: 8,
+            // The Franka scenes' solver (scene::screw_solver: 4 substeps x 32 iterations, not Factory's 2 x 16).
+            substeps: screw_solver().substeps,
+            pos_iters: screw_solver().pos_iters,
+            link_patch_iters: screw_solver().link_patch_iters,
             max_episode_steps: 8192,
             pos_action_scale: [0.1; 3],
             rot_action_scale: [0.1; 3],
@@ -172,7 +174,8 @@ impl Default for FrankaNutBoltConfig {
             bolt_tip_chamfer: true,
             segments_per_turn: 48,
             contact_descent_iters: ContactConfig::default().iterations,
-            contact_candidates_per_invocation: 1,
+            contact_candidates_per_invocation: ContactConfig::default().candidates_per_invocation,
+            contact_workgroup_size: ContactConfig::default().workgroup_size,
             far_error: 0.1,
             success_bonus: 0.0,
             failure_penalty: 0.0,
@@ -195,6 +198,7 @@ impl FrankaNutBoltConfig {
             chunk_world_count: 128,
             iterations: self.contact_descent_iters,
             candidates_per_invocation: self.contact_candidates_per_invocation,
+            workgroup_size: self.contact_workgroup_size,
             ..ContactConfig::default()
         }
     }
@@ -250,6 +254,7 @@ impl FrankaNutBoltConfig {
                 let field = match field {
                     "iterations" => "contact_descent_iters",
                     "candidates_per_invocation" => "contact_candidates_per_invocation",
+                    "workgroup_size" => "contact_workgroup_size",
                     other => other,
                 };
                 return bad(field, format!("{value} is not {expected}"));

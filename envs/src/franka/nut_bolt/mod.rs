@@ -171,9 +171,8 @@ impl FrankaNutBolt {
             dt: cfg.dt,
             substeps: cfg.substeps,
             pos_iters: cfg.pos_iters,
-            vel_iters: 0,
             link_patch_iters: cfg.link_patch_iters,
-            ..Default::default()
+            ..crate::franka::scene::screw_solver()
         };
         let scene_cfg = SceneConfig {
             worlds: env_count as u32,
