@@ -146,13 +146,15 @@ pub struct FrankaNutBoltConfig {
 
 impl Default for FrankaNutBoltConfig {
     fn default() -> Self {
+        // The Franka scenes' solver (scene::screw_solver: dt 1/60 s, 4 substeps x 32 iterations, not
+        // Factory's 2 x 16) and the engine's contact settings.
+        let (solver, contact) = (screw_solver(), ContactConfig::default());
         Self {
             task: TaskName::Screw,
-            dt: 1.0 / 60.0,
-            // The Franka scenes' solver (scene::screw_solver: 4 substeps x 32 iterations, not Factory's 2 x 16).
-            substeps: screw_solver().substeps,
-            pos_iters: screw_solver().pos_iters,
-            link_patch_iters: screw_solver().link_patch_iters,
+            dt: solver.dt,
+            substeps: solver.substeps,
+            pos_iters: solver.pos_iters,
+            link_patch_iters: solver.link_patch_iters,
             max_episode_steps: 8192,
             pos_action_scale: [0.1; 3],
             rot_action_scale: [0.1; 3],
@@ -173,9 +175,9 @@ impl Default for FrankaNutBoltConfig {
             thread_mu: None,
             bolt_tip_chamfer: true,
             segments_per_turn: 48,
-            contact_descent_iters: ContactConfig::default().iterations,
-            contact_candidates_per_invocation: ContactConfig::default().candidates_per_invocation,
-            contact_workgroup_size: ContactConfig::default().workgroup_size,
+            contact_descent_iters: contact.iterations,
+            contact_candidates_per_invocation: contact.candidates_per_invocation,
+            contact_workgroup_size: contact.workgroup_size,
             far_error: 0.1,
             success_bonus: 0.0,
             failure_penalty: 0.0,
