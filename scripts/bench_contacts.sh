@@ -6,7 +6,7 @@
 set -euo pipefail
 out=${1:-bench_contacts.jsonl}
 bin=${CARGO_TARGET_DIR:-$HOME/.cache/factory-rs/target}/release/factory-bench
-mesh=${FACTORY_PEER_ASSETS:?set FACTORY_PEER_ASSETS to Factory's asset tree (meshes under factory/mesh/)}/factory/mesh
+mesh=${FACTORY_PEER_ASSETS:?set FACTORY_PEER_ASSETS to the Factory asset tree, meshes under factory/mesh}/factory/mesh
 frames() { case $1 in 1) echo 20;; 64) echo 3;; *) echo 1;; esac; }
 for w in 1 64 1024; do
   cpu=""; [ "$w" != 1024 ] && cpu="--cpu"
