@@ -208,6 +208,13 @@ pub trait Env: Send {
         None
     }
 
+    /// Hook: the controller an engineer would write by hand for the task, as actions for the current state
+    /// in the policy's raw action space (shape [env_count * action_dim], in [-1, 1]): the `scripted` baseline
+    /// that a learned policy is compared with. `None` (the default) when the env has none.
+    fn scripted_actions(&self) -> Option<Vec<f32>> {
+        None
+    }
+
     /// Hook: the env's whole state (worlds, episode counters, generator) as bytes, so a checkpoint can resume
     /// exactly; `None` (the default) when the env cannot, and a resumed run then starts fresh episodes.
     fn save_state(&self) -> Option<Vec<u8>> {

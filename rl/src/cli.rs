@@ -6,6 +6,8 @@ use std::path::PathBuf;
 
 use clap::Parser;
 
+use crate::baseline::Baseline;
+
 // `factory-train`'s arguments (a doc comment here would become the command's about text).
 #[derive(Parser, Debug)]
 #[command(name = "factory-train", about = "Train a PPO policy on a factory-rs env")]
@@ -69,6 +71,18 @@ pub struct EvalArgs {
     /// mean (the default, as rl_games' player and the paper's tables).
     #[arg(long)]
     pub stochastic: bool,
+    /// Evaluate a baseline over the same episodes instead of the policy (whose file still gives the env and
+    /// its spec): the zero action, the best constant action of a small sweep, an untrained network, or the
+    /// env's scripted controller.
+    #[arg(long, value_enum)]
+    pub baseline: Option<Baseline>,
+    /// The constant baseline's action, comma-separated in the raw action space, instead of the sweep
+    /// (implies `--baseline constant`).
+    #[arg(long, value_name = "A,B,...")]
+    pub constant: Option<String>,
+    /// Episodes per candidate in the constant baseline's sweep (one world per candidate).
+    #[arg(long, default_value_t = 4)]
+    pub sweep_episodes: usize,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,

@@ -4,24 +4,88 @@
 //! same number of consecutive episodes (`episodes / env_count`, the remainder spread over the first worlds),
 //! so short episodes (often the successful ones) are not over-counted as they would be by taking the first
 //! `episodes` to end.
+//!
+//! The same loop runs the baselines a success rate is judged against ([`Actor`]; `factory-eval --baseline`,
+//! [`crate::baseline`]): fixed actions per world (the zero action, a constant one), the env's scripted
+//! controller, or an untrained network. Every report carries its 95% Wilson score interval and each episode's
+//! outcome, so two reports on the same episodes compare episode by episode.
 
 use burn::prelude::*;
 use factory_envs::{EndCauses, Env, StepBuffers};
 
+use crate::error::{Result, RlError};
 use crate::model::{to_vec, ActorCritic};
 use crate::normalizer::RunningMeanStd;
 use crate::ppo::normal_tensor;
 use factory_engine::rng::SplitMix64;
 
+/// What acts in an evaluation.
+pub enum Actor<'a> {
+    /// A network: its mean action, or sampled with its sigma ([`EvalOptions::noise_seed`]).
+    Policy {
+        /// The network.
+        model: &'a ActorCritic,
+        /// Its observation normaliser (None: raw observations).
+        norm: Option<&'a RunningMeanStd>,
+        /// The clamp of normalised observations.
+        clip: f32,
+    },
+    /// The same action at every step, per world: shape [env_count * action_dim], in the raw action space.
+    Fixed(&'a [f32]),
+    /// The env's scripted controller ([`factory_envs::Env::scripted_actions`]).
+    Scripted,
+}
+
+/// How one episode ended.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EpisodeRecord {
+    /// The world it ran in.
+    pub world: usize,
+    /// Its end cause (`success`, `time_limit` or the env's failure cause).
+    pub ended_by: String,
+    /// Its env steps.
+    pub steps: u32,
+    /// Its undiscounted return.
+    #[serde(rename = "return")]
+    pub ret: f64,
+}
+
+/// Where a report came from, so that anyone re-runs it and gets the same numbers.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Provenance {
+    /// The command line.
+    pub command: String,
+    /// The commit the binary was built from (`git describe --always --dirty` at build time; `unknown`
+    /// outside a git checkout).
+    pub commit: String,
+    /// The policy file.
+    pub policy: String,
+    /// SHA-256 of the policy file's bytes (hex).
+    pub policy_sha256: String,
+    /// The seed of the env's draws (and of sampled actions and the untrained network's weights).
+    pub seed: u64,
+    /// Worlds stepped together.
+    pub envs: usize,
+    /// The env's config as evaluated, overrides applied.
+    pub env_config: factory_envs::EnvConfig,
+}
+
 /// The columns of the paper's Tables IV and X-XII that an env reports.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct EvalReport {
+    /// What acted: `policy`, or a baseline (`zero`, `constant`, `untrained`, `scripted`).
+    pub actor: String,
+    /// The constant action of the `constant` baseline (raw action space; empty otherwise).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub constant_action: Vec<f32>,
     /// Episodes evaluated.
     pub episodes: usize,
     /// Whether actions were sampled (`mean + sigma * noise`) instead of the mean.
     pub stochastic: bool,
     /// Fraction that ended in success.
     pub success_rate: f64,
+    /// The success rate's 95% Wilson score interval.
+    pub success_interval_95: [f64; 2],
     /// Mean env steps of the successful episodes (NaN when none succeeded).
     pub mean_steps_to_success: f64,
     /// Mean undiscounted return.
@@ -39,6 +103,41 @@ pub struct EvalReport {
     /// every world counted until the last episode ended; absent for an env that reports no progress.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub progress_steps: Vec<u64>,
+    /// The `constant` baseline's sweep, every candidate (empty otherwise).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub constant_sweep: Vec<crate::baseline::SweepPoint>,
+    /// Every episode, in the order they ended.
+    pub episode_records: Vec<EpisodeRecord>,
+    /// Where the report came from (set by `factory-eval`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub provenance: Option<Provenance>,
+}
+
+/// The 95% Wilson score interval of `successes` in `n` trials ([0, 1] when `n` is 0).
+pub fn wilson_interval(successes: usize, n: usize) -> [f64; 2] {
+    if n == 0 {
+        return [0.0, 1.0];
+    }
+    const Z: f64 = 1.959964;
+    let (k, n) = (successes as f64, n as f64);
+    let p = k / n;
+    let den = 1.0 + Z * Z / n;
+    let mid = (p + Z * Z / (2.0 * n)) / den;
+    let half = Z * (p * (1.0 - p) / n + Z * Z / (4.0 * n * n)).sqrt() / den;
+    [(mid - half).max(0.0), (mid + half).min(1.0)]
+}
+
+/// The actor's name in a summary's title.
+fn actor_words(actor: &str, stochastic: bool) -> String {
+    let how = if stochastic { "sampled" } else { "mean" };
+    match actor {
+        "policy" | "" => format!("{how} actions"),
+        "untrained" => format!("untrained network, {how} actions"),
+        "zero" => "baseline: zero action".into(),
+        "constant" => "baseline: best constant action".into(),
+        "scripted" => "baseline: scripted controller".into(),
+        other => other.to_string(),
+    }
 }
 
 impl EvalReport {
@@ -46,10 +145,24 @@ impl EvalReport {
     /// defines. Outcomes are the env's own end causes (`success`, `time_limit`, its failure causes); the
     /// joint-torque line appears only for an env that measures it.
     pub fn summary(&self, env: &str, worlds: usize) -> String {
-        let actions = if self.stochastic { "sampled" } else { "mean" };
+        let actions = actor_words(&self.actor, self.stochastic);
         let mut rows: Vec<(&str, String)> = Vec::new();
         let successes = self.ended_by.0.get("success").copied().unwrap_or(0);
-        rows.push(("success", format!("{:.1}% ({successes} of {})", 100.0 * self.success_rate, self.episodes)));
+        let [lo, hi] = self.success_interval_95;
+        rows.push((
+            "success",
+            format!(
+                "{:.1}% ({successes} of {}), 95% interval {:.1}-{:.1}%",
+                100.0 * self.success_rate,
+                self.episodes,
+                100.0 * lo,
+                100.0 * hi
+            ),
+        ));
+        if !self.constant_action.is_empty() {
+            let a: Vec<String> = self.constant_action.iter().map(|x| format!("{x}")).collect();
+            rows.push(("action", format!("[{}]", a.join(", "))));
+        }
         if self.mean_steps_to_success.is_finite() {
             rows.push(("steps to success", format!("{:.1} mean", self.mean_steps_to_success)));
         }
@@ -60,7 +173,7 @@ impl EvalReport {
         let ended: Vec<String> = self.ended_by.0.iter().map(|(cause, n)| format!("{cause} {n}")).collect();
         rows.push(("ended by", ended.join(", ")));
         let width = rows.iter().map(|(l, _)| l.len()).max().unwrap_or(0);
-        let mut s = format!("{env} ({actions} actions): {} episodes over {worlds} worlds\n", self.episodes);
+        let mut s = format!("{env} ({actions}): {} episodes over {worlds} worlds\n", self.episodes);
         for (label, value) in rows {
             s.push_str(&format!("  {label:<width$}  {value}\n"));
         }
@@ -164,7 +277,60 @@ pub fn evaluate(
     device: &Device,
     opts: EvalOptions<'_>,
 ) -> EvalReport {
+    evaluate_actor(env, Actor::Policy { model, norm, clip }, episodes, device, opts).expect("a network always acts")
+}
+
+/// The actions of `actor` for the observations in `buf`, clipped to [-1, 1]; `noise` samples a network's.
+fn act(
+    actor: &Actor<'_>,
+    env: &dyn Env,
+    obs: &[f32],
+    noise: Option<&mut (SplitMix64, Tensor<2>)>,
+    device: &Device,
+) -> Result<Vec<f32>> {
+    let spec = env.spec();
+    let (n, d, a_dim) = (spec.env_count, spec.observation_dim(), spec.action_dim());
+    let raw = match actor {
+        Actor::Policy { model, norm, clip } => {
+            let o = Tensor::<1>::from_floats(obs, device).reshape([n, d]);
+            let o = match norm {
+                Some(nm) => nm.normalize(o, Some(*clip)),
+                None => o,
+            };
+            let (mu, _) = model.forward(o);
+            let mu = match noise {
+                Some((rng, std)) => mu + normal_tensor(rng, n, a_dim, device) * std.clone(),
+                None => mu,
+            };
+            return Ok(to_vec(mu.clamp(-1.0, 1.0)));
+        }
+        Actor::Fixed(a) => a.to_vec(),
+        Actor::Scripted => env.scripted_actions().ok_or_else(|| RlError::InvalidValue {
+            field: "--baseline".into(),
+            reason: format!("env `{}` has no scripted controller", spec.name),
+        })?,
+    };
+    if raw.len() != n * a_dim {
+        return Err(RlError::InvalidValue {
+            field: "--baseline".into(),
+            reason: format!("{} actions for {n} worlds x {a_dim} action entries", raw.len()),
+        });
+    }
+    Ok(raw.into_iter().map(|x| x.clamp(-1.0, 1.0)).collect())
+}
+
+/// Runs `env` with `actor` until every world has ended its quota of episodes. Sampling
+/// (`opts.noise_seed`) applies to a network only. Fails only for a scripted actor on an env without a
+/// script, or fixed actions of the wrong length.
+pub fn evaluate_actor(
+    env: &mut dyn Env,
+    actor: Actor<'_>,
+    episodes: usize,
+    device: &Device,
+    opts: EvalOptions<'_>,
+) -> Result<EvalReport> {
     let EvalOptions { noise_seed, mut forces, mut steps, progress } = opts;
+    let noise_seed = if let Actor::Policy { .. } = actor { noise_seed } else { None };
     let bar = progress.then(|| Progress::new(episodes));
     let spec = env.spec().clone();
     if let Some(t) = steps.as_deref_mut() {
@@ -184,19 +350,15 @@ pub fn evaluate(
     let (mut done, mut succ, mut steps_succ, mut ret_sum) = (0usize, 0usize, 0u64, 0.0f64);
     let (mut torque_sum, mut torque_count) = (0.0f64, 0u64);
     let mut ended_by = EndCauses::default();
-    let mut noise = noise_seed.map(|seed| (SplitMix64(seed), model.log_std.val().exp().unsqueeze_dim::<2>(0)));
+    let mut noise = match (&actor, noise_seed) {
+        (Actor::Policy { model, .. }, Some(seed)) => {
+            Some((SplitMix64(seed), model.log_std.val().exp().unsqueeze_dim::<2>(0)))
+        }
+        _ => None,
+    };
+    let mut records = Vec::with_capacity(episodes);
     while done < episodes {
-        let o = Tensor::<1>::from_floats(buf.observation.as_slice(), device).reshape([n, d]);
-        let o = match norm {
-            Some(nm) => nm.normalize(o, Some(clip)),
-            None => o,
-        };
-        let (mu, _) = model.forward(o);
-        let mu = match noise.as_mut() {
-            Some((rng, std)) => mu + normal_tensor(rng, n, a_dim, device) * std.clone(),
-            None => mu,
-        };
-        let action = to_vec(mu.clamp(-1.0, 1.0));
+        let action = act(&actor, &*env, &buf.observation, noise.as_mut(), device)?;
         let row = steps.is_some().then(|| [&buf.observation[..d], &action[..a_dim]].concat());
         env.step(&action, &mut buf);
         if let (Some(t), Some(mut r)) = (steps.as_deref_mut(), row) {
@@ -221,6 +383,8 @@ pub fn evaluate(
                     ended[w] += 1;
                     done += 1;
                     ended_by.record(&buf, w);
+                    let cause = buf.end_cause(w).unwrap_or("unknown").to_string();
+                    records.push(EpisodeRecord { world: w, ended_by: cause, steps: len[w], ret: ret[w] });
                     ret_sum += ret[w];
                     if buf.success[w] != 0.0 {
                         succ += 1;
@@ -242,17 +406,28 @@ pub fn evaluate(
         (Some(a), Some(b)) => a.progress_steps.iter().zip(&b.progress_steps).map(|(x, y)| x - y).collect(),
         _ => Vec::new(),
     };
-    EvalReport {
+    let actor_name = match actor {
+        Actor::Policy { .. } => "policy",
+        Actor::Fixed(_) => "fixed",
+        Actor::Scripted => "scripted",
+    };
+    Ok(EvalReport {
+        actor: actor_name.into(),
+        constant_action: Vec::new(),
         episodes: done,
         stochastic: noise_seed.is_some(),
         success_rate: succ as f64 / done as f64,
+        success_interval_95: wilson_interval(succ, done),
         mean_steps_to_success: if succ > 0 { steps_succ as f64 / succ as f64 } else { f64::NAN },
         mean_return: ret_sum / done as f64,
         mean_joint_torque_norm: if torque_count > 0 { torque_sum / torque_count as f64 } else { f64::NAN },
         ended_by,
         identical_starts,
         progress_steps,
-    }
+        constant_sweep: Vec::new(),
+        episode_records: records,
+        provenance: None,
+    })
 }
 
 #[cfg(test)]
@@ -269,6 +444,7 @@ mod tests {
             mean_steps_to_success: 12.0,
             mean_return: 1.5,
             mean_joint_torque_norm: torque,
+            success_interval_95: wilson_interval(3, 4),
             ended_by,
             ..Default::default()
         }
@@ -279,8 +455,8 @@ mod tests {
         let s = report(f64::NAN).summary("point_mass", 2);
         assert_eq!(
             s,
-            "point_mass (mean actions): 4 episodes over 2 worlds\n  success           75.0% (3 of 4)\n  steps to \
-             success  12.0 mean\n  mean return       1.500\n  ended by          success 3, time_limit 1\n"
+            "point_mass (mean actions): 4 episodes over 2 worlds\n  success           75.0% (3 of 4), 95% interval \
+             30.1-95.4%\n  steps to success  12.0 mean\n  mean return       1.500\n  ended by          success 3, time_limit 1\n"
         );
         assert!(!s.contains("torque") && !s.contains("NaN"), "{s}");
         let s = report(4.25).summary("franka_nut_bolt", 2);

@@ -10,6 +10,7 @@ pub mod ppo;
 pub use config::{DeviceChoice, PpoConfig, RolloutChoice, TrainConfig};
 pub use error::{Result, RlError};
 pub use ppo::{EpisodeTracker, Ppo, UpdateStats};
+pub mod baseline;
 pub mod checkpoint;
 pub mod cli;
 pub mod eval;

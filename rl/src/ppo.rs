@@ -242,6 +242,20 @@ pub struct Ppo {
     pub act_seconds: f64,
 }
 
+/// The network a run with `seed` starts from, and the generator that then draws its noise: what the
+/// learner trains, and the `untrained` baseline of `factory-eval`.
+pub fn initial_model(
+    cfg: &PpoConfig,
+    obs_dim: usize,
+    action_dim: usize,
+    seed: u64,
+    device: &Device,
+) -> (ActorCritic, SplitMix64) {
+    let mut rng = SplitMix64(seed ^ 0x5EED_0F_9A0);
+    let model = ActorCritic::new(obs_dim, action_dim, &cfg.hidden, cfg.init_log_std, &mut rng, device);
+    (model, rng)
+}
+
 impl Ppo {
     /// A fresh learner for an env of this shape; `seed` draws the weights and the noise.
     pub fn new(
@@ -253,8 +267,7 @@ impl Ppo {
         device: Device,
     ) -> Self {
         let train_device = device.clone().autodiff();
-        let mut rng = SplitMix64(seed ^ 0x5EED_0F_9A0);
-        let model = ActorCritic::new(obs_dim, action_dim, &cfg.hidden, cfg.init_log_std, &mut rng, &train_device);
+        let (model, rng) = initial_model(cfg, obs_dim, action_dim, seed, &train_device);
         let mut adam = AdamConfig::new().with_epsilon(1e-8);
         if cfg.max_grad_norm > 0.0 {
             adam = adam.with_grad_clipping(Some(GradientClippingConfig::Norm(cfg.max_grad_norm)));

@@ -472,6 +472,32 @@ impl Env for FrankaNutBolt {
         self.observe(&arm, &mut out.observation);
     }
 
+    /// The scripted Franka scene's screw stage (factory-bench's `franka-nut-bolt`) in this env's action
+    /// space: the fingertip moved to put the nut's axis on the bolt's and pressed 2 mm below where it is, the
+    /// hand turned back to pointing straight down, and the yaw turned clockwise (tightening) with its target
+    /// half the yaw action's range ahead (0.05 rad a step at the default scale, 3 rad/s: already above
+    /// joint 7's 2.61 rad/s limit, so the wrist sets the pace; the full action's lead of twice that lets the
+    /// nut fall off the bolt's tip). Force and torque actions are zero.
+    fn scripted_actions(&self) -> Option<Vec<f32>> {
+        let c = &self.cfg;
+        let arm = self.scene.arm();
+        let mut action = vec![0.0f32; self.spec.env_count * 12];
+        for (w, v) in self.views(&arm).iter().enumerate() {
+            let a = &mut action[w * 12..(w + 1) * 12];
+            let dp = Vec3::new(-v.nut_frame.x, -v.nut_frame.y, -0.002);
+            // The small rotation that turns the hand's axis (z, out of the palm) back to straight down.
+            let tilt = (v.tip_quat * Vec3::Z).cross(-Vec3::Z);
+            for k in 0..3 {
+                a[k] = (dp[k] / c.pos_action_scale[k]).clamp(-1.0, 1.0);
+            }
+            for k in 0..2 {
+                a[3 + k] = (tilt[k] / c.rot_action_scale[k]).clamp(-1.0, 1.0);
+            }
+            a[5] = if c.unidirectional_rot { 0.0 } else { -0.5 };
+        }
+        Some(action)
+    }
+
     fn diagnostics(&self) -> Option<StepDiagnostics> {
         Some(self.last_diagnostics.clone())
     }
