@@ -75,6 +75,14 @@ impl FrankaNutBoltDevice {
     /// bank. Refuses what [`FrankaNutBolt::new`] and [`ScrewStepGpu::new`] refuse, and a device that is not
     /// burn's wgpu runtime.
     pub fn new(cfg: &FrankaNutBoltConfig, env_count: usize, seed: u64, device: &Device) -> Result<Self> {
+        if cfg.balanced_grip {
+            return Err(EnvError::InvalidValue {
+                field: "balanced_grip",
+                reason: "the device rollout does not balance the fingers; use the host rollout \
+                         (train.rollout = \"host\")"
+                    .into(),
+            });
+        }
         let gpu = GpuContext::global()?;
         tensor_buffer(&wgpu_primitive(Tensor::<1>::zeros([1], device), "the learner's device")?, "probe")?;
         let mut env = FrankaNutBolt::new(cfg, env_count, seed)?;

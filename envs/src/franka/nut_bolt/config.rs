@@ -24,17 +24,45 @@ pub struct ScrewRandomization {
     /// Hand and nut turned together about the bolt's axis [deg] (Table III "hand angle": [-90, 90]); the nut
     /// stays on the thread (its height follows the helix, one pitch per turn).
     pub hand_angle_deg: [f32; 2],
-    /// Fingertip offset from the nut's grasp point [mm], in the nut's frame after the turn: x along the
-    /// fingers' closing axis (each finger closes to its flat), y along the flats, z up (Table III:
-    /// [-3, 3], [-3, 3], [0, 3]). An x offset grips the nut off-centre, and the two finger drives (both
-    /// pulling to 0, as Factory's) then squeeze it unequally: a world drawn with 0.3 mm lost the nut within
-    /// 21 steps of zero actions (measured). Keep x at [0, 0] until the gripper balances its fingers.
+    /// Fingertip offset from the nut's grasp point [mm], in the hand's frame after the turn: x along the
+    /// fingers' closing axis (each finger closes to its side of the nut), y along the flats, z up (Table
+    /// III: [-3, 3], [-3, 3], [0, 3]). An x offset grips the nut off-centre, which needs `balanced_grip`:
+    /// the two finger drives pulling each to 0 (Factory's) squeeze an off-centre nut unequally and push it
+    /// further off (a world drawn with 0.3 mm lost the nut within 21 steps of zero actions).
     pub fingertip_offset_mm: [[f32; 2]; 3],
+    /// The nut's offset in the closed hand [mm]: y along the pads' width (Table III's nut-in-gripper x:
+    /// [-3.5, 3.5]) and z up the fingers (Table III's nut-in-gripper z: [-6.5, 1.0], read with z up, so a
+    /// nut up to 6.5 mm further out of the fingers; read with the fingertip frame's z, out of the hand, the
+    /// fingertips would sit up to 6.5 mm below the nut and reach the bolt's head before the nut seats, as
+    /// they do from 2.3 mm: see `grasp_height`). The nut stays on the bolt's axis, so the hand moves by the
+    /// opposite offset (added to `fingertip_offset_mm`).
+    pub nut_in_gripper_mm: [[f32; 2]; 2],
+    /// The nut turned in the hand about its axis [deg] (Table III's nut-in-gripper yaw: [-15, 15]): the
+    /// fingers close on the hexagon turned by this angle, wider than across its flats (by 11.5% at 15 deg),
+    /// touching it near two opposite corners.
+    pub nut_in_gripper_yaw_deg: [f32; 2],
+}
+
+impl ScrewRandomization {
+    /// The paper's Table III ranges for Screw, every one of the seven drawn.
+    pub fn table_iii() -> Self {
+        Self {
+            hand_angle_deg: [-90.0, 90.0],
+            fingertip_offset_mm: [[-3.0, 3.0], [-3.0, 3.0], [0.0, 3.0]],
+            nut_in_gripper_mm: [[-3.5, 3.5], [-6.5, 1.0]],
+            nut_in_gripper_yaw_deg: [-15.0, 15.0],
+        }
+    }
 }
 
 impl Default for ScrewRandomization {
     fn default() -> Self {
-        Self { hand_angle_deg: [0.0; 2], fingertip_offset_mm: [[0.0; 2]; 3] }
+        Self {
+            hand_angle_deg: [0.0; 2],
+            fingertip_offset_mm: [[0.0; 2]; 3],
+            nut_in_gripper_mm: [[0.0; 2]; 2],
+            nut_in_gripper_yaw_deg: [0.0; 2],
+        }
     }
 }
 
@@ -85,6 +113,12 @@ pub struct FrankaNutBoltConfig {
     pub finger_stiffness: f32,
     /// Damping of the fingers' drive [N s/m] (IsaacGymEnvs' Factory `gym_default`: 20).
     pub finger_damping: f32,
+    /// Both fingers squeeze with the same force, their drives' mean (a Franka hand's fingers are coupled):
+    /// each step each finger's drive target is set to its own opening minus the two fingers' mean opening
+    /// (plus the gripper target). Off (Factory's independent drives, each pulling to its target), an
+    /// off-centre nut is squeezed harder from the farther finger and pushed further off; on, a nut is held
+    /// wherever the fingers close on it. On a centred nut the two agree.
+    pub balanced_grip: bool,
     /// Contact materials (`[env.materials]`): the friction of the nut, bolt, finger pads and table, and the
     /// rule that combines a pair's two (defaults: Factory's, which give nut-bolt 0.3, nut-table 0.3,
     /// nut-pad 0.65, pad-table 0.65).
@@ -171,6 +205,7 @@ impl Default for FrankaNutBoltConfig {
             grasp_height: 0.0,
             finger_stiffness: 500.0,
             finger_damping: 20.0,
+            balanced_grip: false,
             materials: ContactMaterials::default(),
             thread_mu: None,
             bolt_tip_chamfer: true,
@@ -237,13 +272,27 @@ impl FrankaNutBoltConfig {
             );
         }
         let r = &self.randomize;
-        let ranges = [("randomize.hand_angle_deg", r.hand_angle_deg, 180.0)]
-            .into_iter()
-            .chain(r.fingertip_offset_mm.iter().map(|&x| ("randomize.fingertip_offset_mm", x, 5.0)));
+        let ranges = [
+            ("randomize.hand_angle_deg", r.hand_angle_deg, 180.0),
+            ("randomize.nut_in_gripper_yaw_deg", r.nut_in_gripper_yaw_deg, 30.0),
+        ]
+        .into_iter()
+        .chain(r.fingertip_offset_mm.iter().map(|&x| ("randomize.fingertip_offset_mm", x, 5.0)))
+        .chain(r.nut_in_gripper_mm.iter().map(|&x| ("randomize.nut_in_gripper_mm", x, 8.0)));
         for (field, [lo, hi], limit) in ranges {
             if !(lo.is_finite() && hi.is_finite() && lo <= hi && lo >= -limit && hi <= limit) {
                 return bad(field, format!("[{lo}, {hi}] must be a range lo <= hi within [-{limit}, {limit}]"));
             }
+        }
+        if r.fingertip_offset_mm[0] != [0.0, 0.0] && !self.balanced_grip {
+            return bad(
+                "randomize.fingertip_offset_mm",
+                format!(
+                    "an offset along the closing axis ({:?} mm) needs balanced_grip = true: independent finger \
+                     drives push an off-centre nut further off",
+                    r.fingertip_offset_mm[0]
+                ),
+            );
         }
         if !(1..=64).contains(&self.contact_descent_iters) {
             return bad("contact_descent_iters", format!("{} is not in 1..=64", self.contact_descent_iters));

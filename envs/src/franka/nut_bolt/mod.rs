@@ -38,6 +38,19 @@ mod config;
 mod task;
 
 pub use config::{FrankaNutBoltConfig, ScrewRandomization, TaskName};
+
+/// One episode's draw of [`ScrewRandomization`] (zero where a range is [0, 0]), in the ranges' units.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StartDraw {
+    /// Hand (and nut) turn about the bolt's axis [deg].
+    pub hand_angle_deg: f32,
+    /// Fingertip offset from the nut's grasp point in the hand's frame [mm] (x closing, y along the flats, z up).
+    pub fingertip_offset_mm: [f32; 3],
+    /// The nut's offset in the hand [mm] (y along the pads, z up).
+    pub nut_in_gripper_mm: [f32; 2],
+    /// The nut's turn in the hand [deg].
+    pub nut_in_gripper_yaw_deg: f32,
+}
 pub use task::{pad_midpoint, NutBoltTask, Outcome, Screw, WorldView, FINGERPAD_LENGTH, KEYPOINT_AXIS};
 
 /// The FrankaNutBolt env (see the module docs).
@@ -67,6 +80,8 @@ pub struct FrankaNutBolt {
     world_steps: Vec<u32>,
     /// Last action per world, shape [env_count * 12].
     world_prev_action: Vec<f32>,
+    /// Each world's draw of the reset randomisation for its running episode, shape [env_count].
+    world_draw: Vec<StartDraw>,
     /// The last step's measurements.
     last_diagnostics: StepDiagnostics,
     /// The nut frame's height when resting on the bolt's tip [m] (the Screw progress's start).
@@ -278,6 +293,7 @@ impl FrankaNutBolt {
             pad_pairs,
             world_steps: vec![0; env_count],
             world_prev_action: vec![0.0; env_count * 12],
+            world_draw: vec![StartDraw::default(); env_count],
             last_diagnostics: StepDiagnostics::default(),
             tip_rest_z: shank,
             profile: EnvProfile::default(),
@@ -367,6 +383,11 @@ impl FrankaNutBolt {
         &self.pad_pairs
     }
 
+    /// Each world's draw of the reset randomisation for its running episode.
+    pub fn start_draws(&self) -> &[StartDraw] {
+        &self.world_draw
+    }
+
     /// The nut's centre of mass in its frame [m].
     pub fn nut_com_local(&self) -> Vec3 {
         self.com_local
@@ -381,22 +402,37 @@ impl FrankaNutBolt {
         let o =
             Vec3::new(draw(r.fingertip_offset_mm[0]), draw(r.fingertip_offset_mm[1]), draw(r.fingertip_offset_mm[2]))
                 * 1e-3;
-        if angle == 0.0 && o == Vec3::ZERO {
+        // Ranges at [0, 0] draw nothing, so the draws above stay those of a config without these.
+        let in_hand = Vec3::new(0.0, draw(r.nut_in_gripper_mm[0]), draw(r.nut_in_gripper_mm[1])) * 1e-3;
+        let nut_yaw = draw(r.nut_in_gripper_yaw_deg).to_radians();
+        self.world_draw[w] = StartDraw {
+            hand_angle_deg: angle.to_degrees(),
+            fingertip_offset_mm: (o * 1e3).to_array(),
+            nut_in_gripper_mm: [in_hand.y * 1e3, in_hand.z * 1e3],
+            nut_in_gripper_yaw_deg: nut_yaw.to_degrees(),
+        };
+        if angle == 0.0 && o == Vec3::ZERO && in_hand == Vec3::ZERO && nut_yaw == 0.0 {
             self.scene.reset_world(self.gpu, w, self.reset_nut, &self.reset_q);
             return;
         }
         let turn = Quat::from_rotation_z(angle);
-        // On the helix: turning counterclockwise by `angle` raises a right-hand nut by pitch * angle / 2 pi.
-        let nut_p = self.reset_nut.0 + Vec3::Z * (self.scene.nb.pitch * angle / std::f32::consts::TAU);
+        let nut_turn = angle + nut_yaw;
+        // On the helix: turning counterclockwise by `nut_turn` raises a right-hand nut by pitch * turn / 2 pi.
+        let nut_p = self.reset_nut.0 + Vec3::Z * (self.scene.nb.pitch * nut_turn / std::f32::consts::TAU);
         let head = self.scene.nb.dims.head_height as f32;
         let grasp = Vec3::new(0.0, 0.0, head + nut_p.z + self.cfg.grasp_height);
+        // The nut stays on the bolt's axis: its offset in the hand moves the hand the other way.
+        let o = o - in_hand;
         let tip = grasp + turn * Vec3::new(o.x, o.y, 0.0) + Vec3::Z * o.z;
         let mut q = inverse_kinematics(&self.scene, &self.reset_q, tip, turn * self.down);
-        // The fingers close along the nut's x: the left one (+y of the hand) to the flat at -o.x + w/2.
-        let half_width = 0.5 * self.scene.nb.dims.width_across_flats as f32;
-        q[ARM_DOF] = half_width - o.x + 2e-4;
-        q[ARM_DOF + 1] = half_width + o.x + 2e-4;
-        self.scene.reset_world(self.gpu, w, (nut_p, turn * self.reset_nut.1), &q);
+        // The fingers close along the hand's x: the left one (+y of the hand) to the nut's side at -o.x + s,
+        // where s is the turned hexagon's half-extent along x (its support: the apothem at yaw 0, a corner's
+        // projection R cos(30 deg - |yaw|) with R = apothem / cos 30 deg otherwise).
+        let apothem = 0.5 * self.scene.nb.dims.width_across_flats as f32;
+        let s = apothem * (std::f32::consts::FRAC_PI_6 - nut_yaw.abs()).cos() / std::f32::consts::FRAC_PI_6.cos();
+        q[ARM_DOF] = s - o.x + 2e-4;
+        q[ARM_DOF + 1] = s + o.x + 2e-4;
+        self.scene.reset_world(self.gpu, w, (nut_p, Quat::from_rotation_z(nut_turn) * self.reset_nut.1), &q);
     }
 
     /// Records the step's torque norms and contact forces (before any reset clears a world's warm start).
@@ -581,10 +617,15 @@ impl Env for FrankaNutBolt {
         self.controller.compute(&arm, &targets, &mut tau);
         let mut control = ArticulationControl { joint_tau: tau, joint_target_q: self.scene.sim.joints.joint_q.clone() };
         for w in 0..n {
-            // The fingers follow the gripper target through their drives; the arm joints have no drive.
+            // The fingers follow the gripper target through their drives; the arm joints have no drive. A
+            // balanced grip moves each finger's target by its opening's difference from the mean, so both
+            // drives pull with the mean's force.
+            let q = &self.scene.sim.joints.joint_q[w * DOF + ARM_DOF..w * DOF + ARM_DOF + 2];
+            let mean = 0.5 * (q[0] + q[1]);
             for f in 0..2 {
+                let balance = if self.cfg.balanced_grip { q[f] - mean } else { 0.0 };
                 control.joint_tau[w * DOF + ARM_DOF + f] = 0.0;
-                control.joint_target_q[w * DOF + ARM_DOF + f] = targets.gripper_q[w * 2 + f];
+                control.joint_target_q[w * DOF + ARM_DOF + f] = targets.gripper_q[w * 2 + f] + balance;
             }
         }
         let controlled = started.elapsed().as_secs_f64();

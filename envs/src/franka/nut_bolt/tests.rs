@@ -139,3 +139,23 @@ fn the_screw_config_shows_the_default_materials() {
         assert!(materials.get(key).is_some(), "{path}: [env.materials] does not write out `{key}`");
     }
 }
+
+/// configs/screw_table_iii.toml is configs/screw.toml with Table III's seven ranges and the balanced grip,
+/// nothing else changed in `[env]`.
+#[test]
+fn the_table_iii_config_differs_from_screw_only_in_its_starts() {
+    let env_of = |name: &str| {
+        let path = format!("{}/../configs/{name}", env!("CARGO_MANIFEST_DIR"));
+        let file: toml::Value = toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let mut env = file["env"].clone();
+        env.as_table_mut().unwrap().remove("type");
+        env.try_into::<FrankaNutBoltConfig>().unwrap_or_else(|e| panic!("{path}: {e}"))
+    };
+    let (screw, table_iii) = (env_of("screw.toml"), env_of("screw_table_iii.toml"));
+    assert_eq!(table_iii.randomize, ScrewRandomization::table_iii());
+    assert!(table_iii.balanced_grip && table_iii.check().is_ok());
+    assert_eq!(
+        FrankaNutBoltConfig { randomize: ScrewRandomization::table_iii(), balanced_grip: true, ..screw },
+        table_iii
+    );
+}
