@@ -88,6 +88,39 @@ pub struct EvalArgs {
     pub json: bool,
 }
 
+// `factory-calibrate`'s arguments.
+#[derive(Parser, Debug)]
+#[command(
+    name = "factory-calibrate",
+    about = "Keep the stable Screw starts of a config's reset ranges (FrankaCalibrate, paper App. D3)"
+)]
+pub struct CalibrateArgs {
+    /// The training config whose `[env]` (a `franka_nut_bolt` env) gives the ranges and the physics.
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Override a key, e.g. `--set 'env.randomize.hand_angle_deg=[-45, 45]'` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// The calibration file to write (JSON; an env reads it with `randomize.starts_file`).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Worlds held together per round.
+    #[arg(long, default_value_t = 64)]
+    pub worlds: usize,
+    /// Rounds of draws (worlds x rounds starts are tried).
+    #[arg(long, default_value_t = 4)]
+    pub rounds: usize,
+    /// Seed of the draws.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// How long each start is held with zero actions [s].
+    #[arg(long, default_value_t = 1.0)]
+    pub hold_s: f32,
+    /// The largest slip of the nut relative to the pads over the hold that is kept [mm].
+    #[arg(long, default_value_t = 1.0)]
+    pub max_slip_mm: f32,
+}
+
 // `factory-plot`'s arguments.
 #[derive(Parser, Debug)]
 #[command(name = "factory-plot", about = "Plot a factory-rs run's learning curve")]

@@ -1,11 +1,11 @@
-//! docs/CLI.md's `factory-train`, `factory-eval` and `factory-plot` sections are the binaries' `--help`
+//! docs/CLI.md's `factory-train`, `factory-eval`, `factory-plot` and `factory-calibrate` sections are the binaries' `--help`
 //! (see assets/tests/support/cli_doc.rs; regenerate with `FACTORY_BLESS=1`).
 
 #[path = "../../assets/tests/support/cli_doc.rs"]
 mod cli_doc;
 
 use clap::CommandFactory;
-use factory_rl::cli::{EvalArgs, PlotArgs, TrainArgs};
+use factory_rl::cli::{CalibrateArgs, EvalArgs, PlotArgs, TrainArgs};
 
 #[test]
 fn cli_md_matches_the_help() {
@@ -13,5 +13,6 @@ fn cli_md_matches_the_help() {
         ("factory-train", TrainArgs::command()),
         ("factory-eval", EvalArgs::command()),
         ("factory-plot", PlotArgs::command()),
+        ("factory-calibrate", CalibrateArgs::command()),
     ]);
 }

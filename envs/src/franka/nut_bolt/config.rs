@@ -41,6 +41,11 @@ pub struct ScrewRandomization {
     /// fingers close on the hexagon turned by this angle, wider than across its flats (by 11.5% at 15 deg),
     /// touching it near two opposite corners.
     pub nut_in_gripper_yaw_deg: [f32; 2],
+    /// A calibration file of stable starts (`factory-calibrate`, FrankaCalibrate of the paper's App. D3) to
+    /// draw every reset from, uniformly, in place of the ranges above; refused when it was made for other
+    /// physics or other ranges (each differing key named with both values).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub starts_file: Option<String>,
 }
 
 impl ScrewRandomization {
@@ -51,6 +56,7 @@ impl ScrewRandomization {
             fingertip_offset_mm: [[-3.0, 3.0], [-3.0, 3.0], [0.0, 3.0]],
             nut_in_gripper_mm: [[-3.5, 3.5], [-6.5, 1.0]],
             nut_in_gripper_yaw_deg: [-15.0, 15.0],
+            starts_file: None,
         }
     }
 }
@@ -62,6 +68,7 @@ impl Default for ScrewRandomization {
             fingertip_offset_mm: [[0.0; 2]; 3],
             nut_in_gripper_mm: [[0.0; 2]; 2],
             nut_in_gripper_yaw_deg: [0.0; 2],
+            starts_file: None,
         }
     }
 }

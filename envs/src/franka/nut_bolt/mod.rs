@@ -34,13 +34,15 @@ use super::scene::{NutBoltScene, SceneConfig, ARM_DOF, BASE, DOF, Q_START};
 use crate::env::{Env, EnvProfile, EnvSpec, StepBuffers, StepDiagnostics};
 use crate::error::{EnvError, Result};
 
+pub mod calibrate;
 mod config;
 mod task;
 
 pub use config::{FrankaNutBoltConfig, ScrewRandomization, TaskName};
 
 /// One episode's draw of [`ScrewRandomization`] (zero where a range is [0, 0]), in the ranges' units.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct StartDraw {
     /// Hand (and nut) turn about the bolt's axis [deg].
     pub hand_angle_deg: f32,
@@ -82,6 +84,8 @@ pub struct FrankaNutBolt {
     world_prev_action: Vec<f32>,
     /// Each world's draw of the reset randomisation for its running episode, shape [env_count].
     world_draw: Vec<StartDraw>,
+    /// The calibrated starts resets draw from (`randomize.starts_file`), in place of the ranges.
+    starts: Option<calibrate::CalibrationFile>,
     /// The last step's measurements.
     last_diagnostics: StepDiagnostics,
     /// The nut frame's height when resting on the bolt's tip [m] (the Screw progress's start).
@@ -181,6 +185,15 @@ impl FrankaNutBolt {
     /// `env_count` worlds; `seed` draws the reset randomisation.
     pub fn new(cfg: &FrankaNutBoltConfig, env_count: usize, seed: u64) -> Result<Self> {
         cfg.check()?;
+        let starts = match &cfg.randomize.starts_file {
+            Some(path) => {
+                let path = std::path::Path::new(path);
+                let file = calibrate::CalibrationFile::load(path)?;
+                file.check_env(cfg, path)?;
+                Some(file)
+            }
+            None => None,
+        };
         let gpu = GpuContext::global()?;
         let solver = SolverConfig {
             dt: cfg.dt,
@@ -294,6 +307,7 @@ impl FrankaNutBolt {
             world_steps: vec![0; env_count],
             world_prev_action: vec![0.0; env_count * 12],
             world_draw: vec![StartDraw::default(); env_count],
+            starts,
             last_diagnostics: StepDiagnostics::default(),
             tip_rest_z: shank,
             profile: EnvProfile::default(),
@@ -396,6 +410,13 @@ impl FrankaNutBolt {
     /// Resets world `w` to a new episode's start, drawing the randomisation (the host state; the link bodies
     /// follow at the next [`ArticulatedSim::sync_links`](factory_engine::sim::ArticulatedSim::sync_links)).
     pub fn reset_world(&mut self, w: usize) {
+        if let Some(file) = &self.starts {
+            let i = ((self.rng.unit() * file.starts.len() as f32) as usize).min(file.starts.len() - 1);
+            let (pose, q, draw) = file.start(i);
+            self.world_draw[w] = draw;
+            self.scene.reset_world(self.gpu, w, pose, &q);
+            return;
+        }
         let r = self.cfg.randomize.clone();
         let mut draw = |[lo, hi]: [f32; 2]| if hi > lo { lo + (hi - lo) * self.rng.unit() } else { lo };
         let angle = draw(r.hand_angle_deg).to_radians();
