@@ -1,5 +1,6 @@
 //! Run folders: `runs/<config-stem>/<UTC timestamp>/` holding `config.toml` (the resolved config),
-//! `checkpoint.bin`, `policy.json`, `metrics.csv` and TensorBoard event files under `tb/`.
+//! `checkpoint.bin`, `policy.json`, `provenance.json` (where the policy came from), `metrics.csv` and
+//! TensorBoard event files under `tb/`.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -15,6 +16,84 @@ pub fn checkpoint_path(run: &Path) -> PathBuf {
 /// The exported policy inside a run folder.
 pub fn policy_path(run: &Path) -> PathBuf {
     run.join("policy.json")
+}
+
+/// Where a run's policy came from, rewritten with every export: copied with `policy.json` and
+/// `config.toml` into `policies/`, it lets anyone re-run the training and check the file.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Provenance {
+    /// SHA-256 of `policy.json`'s bytes (hex).
+    pub policy_sha256: String,
+    /// The seed of the run (the resolved config is `config.toml` beside this file).
+    pub seed: u64,
+    /// Updates and env steps trained.
+    pub updates: usize,
+    /// Env steps trained.
+    pub env_steps: u64,
+    /// Training wall time summed over the run's sessions [s].
+    pub training_seconds: f64,
+    /// Each build that trained the run (`git describe --always --dirty` at build time) and the update its
+    /// session started from, in order; a resume with the same build adds nothing.
+    pub builds: Vec<(String, usize)>,
+    /// The CPU the last session ran on (`/proc/cpuinfo`'s model name and the core count; `unknown`
+    /// elsewhere).
+    pub machine: String,
+}
+
+/// The provenance file inside a run folder.
+pub fn provenance_path(run: &Path) -> PathBuf {
+    run.join("provenance.json")
+}
+
+/// This machine's CPU model and logical core count.
+fn machine() -> String {
+    let model = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown".into());
+    let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
+    format!("{model}, {cores} cores")
+}
+
+/// Rewrites `run`'s provenance after the policy was exported: the policy's hash and the run's counts, this
+/// build appended to the builds when it differs from the last (`session_start`: the update this session
+/// started from).
+pub fn write_provenance(
+    run: &Path,
+    seed: u64,
+    updates: usize,
+    env_steps: u64,
+    seconds: f64,
+    session_start: usize,
+) -> Result<()> {
+    use sha2::{Digest, Sha256};
+    let policy = policy_path(run);
+    let bytes = std::fs::read(&policy).map_err(|e| RlError::io(&policy, e))?;
+    let path = provenance_path(run);
+    let mut builds = std::fs::read_to_string(&path)
+        .ok()
+        .and_then(|t| serde_json::from_str::<Provenance>(&t).ok())
+        .map(|p| p.builds)
+        .unwrap_or_default();
+    let commit = env!("FACTORY_BUILD_COMMIT");
+    if builds.last().is_none_or(|(c, _)| c != commit) {
+        builds.push((commit.to_string(), session_start));
+    }
+    let p = Provenance {
+        policy_sha256: format!("{:x}", Sha256::digest(&bytes)),
+        seed,
+        updates,
+        env_steps,
+        training_seconds: seconds,
+        builds,
+        machine: machine(),
+    };
+    let text = serde_json::to_string_pretty(&p).map_err(|e| RlError::io(&path, std::io::Error::other(e)))?;
+    crate::checkpoint::write_atomic(&path, text.as_bytes())
 }
 
 /// `YYYYmmdd-HHMMSS` in UTC for a Unix time (Howard Hinnant's days-to-civil algorithm).

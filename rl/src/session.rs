@@ -13,7 +13,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use tensorboard_rs::summary_writer::SummaryWriter;
 
 use crate::checkpoint::write_atomic;
-use crate::run_dir::{checkpoint_path, policy_path, MetricsCsv};
+use crate::run_dir::{checkpoint_path, policy_path, write_provenance, MetricsCsv};
 use crate::train::{RecentEpisodes, Trainer, UpdateReport};
 use crate::Result;
 
@@ -92,14 +92,14 @@ pub fn run_session(trainer: &mut Trainer, run: &Path, progress: Progress, stop: 
             Progress::Quiet => {}
         }
         if r.update % every == 0 || r.update == total {
-            save(trainer, run, &mut tb)?;
+            save(trainer, run, &mut tb, updates_at_start)?;
         }
         if stop.load(Ordering::SeqCst) {
             interrupted = true;
             break;
         }
     }
-    save(trainer, run, &mut tb)?;
+    save(trainer, run, &mut tb, updates_at_start)?;
     bar.finish_and_clear();
     Ok(SessionSummary {
         interrupted,
@@ -110,10 +110,13 @@ pub fn run_session(trainer: &mut Trainer, run: &Path, progress: Progress, stop: 
     })
 }
 
-/// The checkpoint and the policy, both atomic, and the event files flushed.
-fn save(trainer: &Trainer, run: &Path, tb: &mut SummaryWriter) -> Result<()> {
+/// The checkpoint, the policy and its provenance, each atomic, and the event files flushed
+/// (`session_start`: the update this session started from).
+fn save(trainer: &Trainer, run: &Path, tb: &mut SummaryWriter, session_start: usize) -> Result<()> {
     trainer.save_checkpoint(&checkpoint_path(run))?;
     trainer.export_policy(&policy_path(run))?;
+    let t = trainer;
+    write_provenance(run, t.cfg.seed, t.updates_done, t.env_steps, t.wall_seconds, session_start)?;
     tb.flush();
     Ok(())
 }

@@ -72,9 +72,17 @@ fn train_export_evaluate_plot() {
     let cfg = train(&run);
 
     // The run folder holds what factory-eval, factory-plot and `--resume` read.
-    for file in ["config.toml", "metrics.csv", "checkpoint.bin", "policy.json"] {
+    for file in ["config.toml", "metrics.csv", "checkpoint.bin", "policy.json", "provenance.json"] {
         assert!(run.join(file).is_file(), "{file} missing from the run folder {}", run.display());
     }
+    // The provenance names the policy by its hash, and the run's seed and counts.
+    let prov: factory_rl::run_dir::Provenance =
+        serde_json::from_str(&std::fs::read_to_string(run.join("provenance.json")).unwrap()).unwrap();
+    let policy_bytes = std::fs::read(run.join("policy.json")).unwrap();
+    use sha2::Digest;
+    assert_eq!(prov.policy_sha256, format!("{:x}", sha2::Sha256::digest(&policy_bytes)));
+    assert_eq!((prov.seed, prov.updates, prov.env_steps), (7, UPDATES, (UPDATES * ENVS * HORIZON) as u64));
+    assert_eq!(prov.builds.len(), 1, "{:?}", prov.builds);
     let saved = TrainConfig::load(&run.join("config.toml"), &[]).expect("the saved config.toml loads");
     assert_eq!(saved, cfg, "config.toml is the resolved config, overrides included");
     assert_eq!((saved.train.env_count, saved.ppo.horizon, saved.seed), (ENVS, HORIZON, 7));
