@@ -3,8 +3,10 @@
 
 Usage: scripts/eval_table.py REPORT.json [REPORT.json ...]
 
-Each file holds the one JSON object `factory-eval --json` prints. Per file and, with more than one, for
-all of them together (independent episodes, e.g. chunks run with different --seed): episodes, seated with
+Each file holds the JSON objects `factory-eval --json` prints, one per line (one run, or several appended).
+Each row is named by its file and by what acted (the policy or a baseline, with mean or sampled actions).
+Per report and, when every report is of the same actor (independent episodes, e.g. chunks run with
+different --seed), for all of them together: episodes, seated with
 the share and its 95% Wilson score interval, mean env steps to seat (over the seated episodes), mean
 return (over all episodes) and how the others ended. The joint-torque norm is a mean over every world's
 steps, whose count a report does not give, so the sum row shows the chunks' range instead of a mean.
@@ -46,9 +48,23 @@ def main():
     tot_steps = tot_ret = 0.0
     tot_causes = Counter()
     torques = []
+    actors = set()
+    reports = []
     for path in paths:
         try:
-            r = json.load(open(path))
+            lines = [l for l in open(path) if l.strip()]
+            reports += [(path, json.loads(l)) for l in lines]
+        except (OSError, ValueError) as e:
+            sys.exit(f"{path}: not factory-eval --json output ({e})")
+    for path, r in reports:
+        try:
+            actor = r.get("actor", "policy")
+            how = "sampled" if r["stochastic"] else "mean"
+            if actor == "constant":
+                how = "[" + ", ".join(f"{a:g}" for a in r["constant_action"]) + "]"
+            elif actor in ("zero", "scripted"):
+                how = "-"
+            actors.add((actor, how))
             n = int(r["episodes"])
             seated = round(r["success_rate"] * n)
             causes = Counter(r["ended_by"])
@@ -57,14 +73,15 @@ def main():
         if causes.get("success", 0) != seated:
             sys.exit(f"{path}: success_rate x episodes = {seated} but ended_by.success = {causes.get('success')}")
         steps = r["mean_steps_to_success"] if seated else float("nan")
-        print(row(path, n, seated, steps, r["mean_return"], causes, f"{r['mean_joint_torque_norm']:.2f}"))
+        name = f"{actor} ({how}), {path.rsplit('/', 1)[-1]}"
+        print(row(name, n, seated, steps, r["mean_return"], causes, f"{r['mean_joint_torque_norm']:.2f}"))
         tot_n += n
         tot_seated += seated
         tot_steps += steps * seated if seated else 0.0
         tot_ret += r["mean_return"] * n
         tot_causes += causes
         torques.append(r["mean_joint_torque_norm"])
-    if len(paths) > 1:
+    if len(reports) > 1 and len(actors) == 1:
         steps = tot_steps / tot_seated if tot_seated else float("nan")
         torque = f"{min(torques):.2f}-{max(torques):.2f}"
         print(row("all", tot_n, tot_seated, steps, tot_ret / tot_n, tot_causes, torque))
