@@ -258,13 +258,20 @@ impl PolicyFile {
         }
     }
 
-    /// Writes the policy atomically.
-    pub fn save(&self, path: &Path) -> Result<()> {
-        write_atomic(path, &serde_json::to_vec(self).expect("policy serialises"))
+    /// Writes the policy atomically and returns the SHA-256 of the bytes written (hex).
+    pub fn save(&self, path: &Path) -> Result<String> {
+        let bytes = serde_json::to_vec(self).expect("policy serialises");
+        write_atomic(path, &bytes)?;
+        Ok(sha256_hex(&bytes))
     }
 
     /// Reads a policy file.
     pub fn load(path: &Path) -> Result<Self> {
+        Ok(Self::load_hashed(path)?.0)
+    }
+
+    /// Reads a policy file, with the SHA-256 of its bytes (hex).
+    pub fn load_hashed(path: &Path) -> Result<(Self, String)> {
         let bytes = std::fs::read(path).map_err(|e| RlError::io(path, e))?;
         let p: PolicyFile = serde_json::from_slice(&bytes)
             .map_err(|e| RlError::BadFile { path: path.into(), reason: format!("not a policy file: {e}") })?;
@@ -274,7 +281,12 @@ impl PolicyFile {
                 reason: format!("format `{}`, expected `{POLICY_FORMAT}`", p.format),
             });
         }
-        Ok(p)
+        Ok((p, sha256_hex(&bytes)))
+    }
+
+    /// The observation normaliser the policy acts with (None when it takes raw observations).
+    pub fn normalizer(&self, device: &Device) -> Option<RunningMeanStd> {
+        self.normalize_observation.then(|| self.obs_norm.to_normalizer(device))
     }
 
     /// The network and observation normaliser on `device` (no autodiff), for acting.
@@ -289,9 +301,14 @@ impl PolicyFile {
             device,
         );
         let model = load_params(model, &self.params, device, path)?;
-        let norm = self.normalize_observation.then(|| self.obs_norm.to_normalizer(device));
-        Ok((model, norm))
+        Ok((model, self.normalizer(device)))
     }
+}
+
+/// The SHA-256 of `bytes` as lower-case hex: how reports and provenance files name a policy file.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    format!("{:x}", Sha256::digest(bytes))
 }
 
 /// Atomic write with this crate's error.

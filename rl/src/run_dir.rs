@@ -6,7 +6,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Result, RlError};
-use crate::train::UpdateReport;
+use crate::train::{Trainer, UpdateReport};
 
 /// The checkpoint inside a run folder.
 pub fn checkpoint_path(run: &Path) -> PathBuf {
@@ -59,20 +59,10 @@ fn machine() -> String {
     format!("{model}, {cores} cores")
 }
 
-/// Rewrites `run`'s provenance after the policy was exported: the policy's hash and the run's counts, this
-/// build appended to the builds when it differs from the last (`session_start`: the update this session
-/// started from).
-pub fn write_provenance(
-    run: &Path,
-    seed: u64,
-    updates: usize,
-    env_steps: u64,
-    seconds: f64,
-    session_start: usize,
-) -> Result<()> {
-    use sha2::{Digest, Sha256};
-    let policy = policy_path(run);
-    let bytes = std::fs::read(&policy).map_err(|e| RlError::io(&policy, e))?;
+/// Rewrites `run`'s provenance after the policy was exported (`policy_sha256`: the hash of the file written):
+/// the trainer's seed and counts, this build appended to the builds when it differs from the last
+/// (`session_start`: the update this session started from).
+pub fn write_provenance(run: &Path, policy_sha256: &str, trainer: &Trainer, session_start: usize) -> Result<()> {
     let path = provenance_path(run);
     let mut builds = std::fs::read_to_string(&path)
         .ok()
@@ -84,11 +74,11 @@ pub fn write_provenance(
         builds.push((commit.to_string(), session_start));
     }
     let p = Provenance {
-        policy_sha256: format!("{:x}", Sha256::digest(&bytes)),
-        seed,
-        updates,
-        env_steps,
-        training_seconds: seconds,
+        policy_sha256: policy_sha256.to_string(),
+        seed: trainer.cfg.seed,
+        updates: trainer.updates_done,
+        env_steps: trainer.env_steps,
+        training_seconds: trainer.wall_seconds,
         builds,
         machine: machine(),
     };

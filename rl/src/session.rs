@@ -114,9 +114,8 @@ pub fn run_session(trainer: &mut Trainer, run: &Path, progress: Progress, stop: 
 /// (`session_start`: the update this session started from).
 fn save(trainer: &Trainer, run: &Path, tb: &mut SummaryWriter, session_start: usize) -> Result<()> {
     trainer.save_checkpoint(&checkpoint_path(run))?;
-    trainer.export_policy(&policy_path(run))?;
-    let t = trainer;
-    write_provenance(run, t.cfg.seed, t.updates_done, t.env_steps, t.wall_seconds, session_start)?;
+    let policy_sha256 = trainer.export_policy(&policy_path(run))?;
+    write_provenance(run, &policy_sha256, trainer, session_start)?;
     tb.flush();
     Ok(())
 }

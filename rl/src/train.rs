@@ -439,8 +439,8 @@ impl Trainer {
         )
     }
 
-    /// Exports the policy.
-    pub fn export_policy(&self, path: &Path) -> Result<()> {
+    /// Exports the policy; returns the SHA-256 of the file written (hex).
+    pub fn export_policy(&self, path: &Path) -> Result<String> {
         PolicyFile::from_learner(&self.ppo, self.run.spec(), &self.cfg.env, self.updates_done, self.env_steps)
             .save(path)
     }

@@ -15,7 +15,6 @@ use factory_rl::checkpoint::PolicyFile;
 use factory_rl::cli::EvalArgs;
 use factory_rl::eval::{evaluate_actor, Actor, EvalOptions, EvalReport, Provenance, Trace};
 use factory_rl::TrainConfig;
-use sha2::{Digest, Sha256};
 
 /// The constant baseline's action: `--constant`, or the best of the sweep (returned with the sweep).
 fn constant_action(
@@ -44,9 +43,7 @@ fn constant_action(
 
 fn main() -> Result<()> {
     let args = EvalArgs::parse();
-    let policy_bytes =
-        std::fs::read(&args.policy).with_context(|| format!("reading the policy {}", args.policy.display()))?;
-    let policy = PolicyFile::load(&args.policy)?;
+    let (policy, policy_sha256) = PolicyFile::load_hashed(&args.policy)?;
     let env_cfg = match &args.config {
         Some(c) => TrainConfig::load(c, &[])?.env,
         None => policy.env_config.clone(),
@@ -59,8 +56,7 @@ fn main() -> Result<()> {
     let a_dim = env.spec().action_dim();
     let (model, norm) = match baseline {
         Some(Baseline::Untrained) => {
-            let (_, norm) = policy.build(&device, &args.policy)?;
-            (Some(baseline::untrained_model(&policy, args.seed, &device)), norm)
+            (Some(baseline::untrained_model(&policy, args.seed, &device)), policy.normalizer(&device))
         }
         None => {
             let (model, norm) = policy.build(&device, &args.policy)?;
@@ -98,7 +94,7 @@ fn main() -> Result<()> {
         command: std::env::args().collect::<Vec<_>>().join(" "),
         commit: env!("FACTORY_BUILD_COMMIT").into(),
         policy: args.policy.display().to_string(),
-        policy_sha256: format!("{:x}", Sha256::digest(&policy_bytes)),
+        policy_sha256,
         seed: args.seed,
         envs: args.envs,
         env_config: env_cfg.clone(),

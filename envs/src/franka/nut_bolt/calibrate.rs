@@ -174,18 +174,22 @@ pub fn calibrate(
     let mut env = FrankaNutBolt::new(&held, worlds, seed)?;
     let mut buf = StepBuffers::new(env.spec());
     let zero = vec![0.0f32; worlds * env.spec().action_dim()];
-    // The nut relative to the pads' midpoint in the hand's frame [m].
-    let relative = |env: &FrankaNutBolt, w: usize| {
+    // Every world's nut relative to the pads' midpoint in the hand's frame [m].
+    let relative = |env: &FrankaNutBolt| -> Vec<Vec3> {
         let arm = env.scene().arm();
-        let (p, q) = env.scene().nut_pose(w);
-        let nut = p + q * env.nut_com_local();
-        arm.ee_quat[w].inverse() * (nut - pad_midpoint(arm.ee_pos[w], arm.ee_quat[w]))
+        (0..worlds)
+            .map(|w| {
+                let (p, q) = env.scene().nut_pose(w);
+                let nut = p + q * env.nut_com_local();
+                arm.ee_quat[w].inverse() * (nut - pad_midpoint(arm.ee_pos[w], arm.ee_quat[w]))
+            })
+            .collect()
     };
     let mut starts = Vec::new();
     for round in 0..rounds {
         env.reset(&mut buf);
         let draws = env.start_draws().to_vec();
-        let before: Vec<Vec3> = (0..worlds).map(|w| relative(&env, w)).collect();
+        let before = relative(&env);
         let mut ended = vec![false; worlds];
         for _ in 0..hold_steps {
             env.step(&zero, &mut buf);
@@ -193,8 +197,9 @@ pub fn calibrate(
                 *e |= buf.done(w);
             }
         }
+        let after = relative(&env);
         for w in (0..worlds).filter(|&w| !ended[w]) {
-            let slip_mm = 1e3 * relative(&env, w).distance(before[w]);
+            let slip_mm = 1e3 * after[w].distance(before[w]);
             if slip_mm < max_slip_mm {
                 let (p, q) = env.scene().nut_pose(w);
                 starts.push(CalibratedStart {
