@@ -39,6 +39,7 @@ mod config;
 mod task;
 
 pub use config::{FrankaNutBoltConfig, ScrewRandomization, TaskName};
+pub use task::{pad_midpoint, NutBoltTask, Outcome, Screw, WorldView, FINGERPAD_LENGTH, KEYPOINT_AXIS};
 
 /// One episode's draw of [`ScrewRandomization`] (zero where a range is [0, 0]), in the ranges' units.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -53,7 +54,6 @@ pub struct StartDraw {
     /// The nut's turn in the hand [deg].
     pub nut_in_gripper_yaw_deg: f32,
 }
-pub use task::{pad_midpoint, NutBoltTask, Outcome, Screw, WorldView, FINGERPAD_LENGTH, KEYPOINT_AXIS};
 
 /// The FrankaNutBolt env (see the module docs).
 pub struct FrankaNutBolt {
